@@ -1,0 +1,150 @@
+"""Object geometry: faceted shapes and the facet-camera geometry the forward model needs.
+
+The paper's test object (Love & Efford, sec. 4) is a tessellated hemisphere of
+flat facets standing on a ground plane at the origin of the world frame
+(x east, y north, z up, metres). The paper does not give its tessellation;
+:func:`tessellated_hemisphere` builds rings of planar quadrilaterals (each an
+isosceles trapezoid, hence exactly planar) capped by a fan of triangles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Facets",
+    "tessellated_hemisphere",
+    "view_directions",
+    "CAMERA_AZIMUTHS",
+    "camera_position",
+]
+
+#: Camera bearings of the paper's five views, degrees clockwise from north
+#: (the camera stands this way from the object and looks back at it).
+CAMERA_AZIMUTHS = {"W": 270.0, "SW": 225.0, "S": 180.0, "SE": 135.0, "E": 90.0}
+
+
+@dataclass(frozen=True)
+class Facets:
+    """Planar facets of an object.
+
+    Attributes
+    ----------
+    ids : ndarray of int, shape (F,)
+        Facet labels (k > 0, the value in a bundle's ``facets.png``).
+    normal : ndarray, shape (F, 3)
+        Outward unit normals, world frame.
+    center : ndarray, shape (F, 3)
+        Facet centroids, world frame [m].
+    polygons : list of ndarray (V_f, 3)
+        Vertices of each facet, counter-clockwise seen from outside [m].
+    """
+
+    ids: np.ndarray
+    normal: np.ndarray
+    center: np.ndarray
+    polygons: list = field(default_factory=list, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def subset(self, index) -> Facets:
+        """The facets selected by an integer or boolean index."""
+        idx = np.arange(len(self))[index]
+        polys = [self.polygons[i] for i in idx] if self.polygons else []
+        return Facets(self.ids[idx], self.normal[idx], self.center[idx], polys)
+
+
+def _polygon_normal_centroid(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normal (Newell's method) and area centroid of a planar polygon."""
+    v = np.asarray(vertices, dtype=float)
+    nxt = np.roll(v, -1, axis=0)
+    newell = np.sum(np.cross(v, nxt), axis=0)  # = 2 x area vector
+    area2 = np.linalg.norm(newell)
+    normal = newell / area2
+    # area-weighted centroid of the fan triangles from vertex 0
+    a, b, c = v[0], v[1:-1], v[2:]
+    tri_area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=-1)
+    tri_centroid = (a + b + c) / 3.0
+    centroid = np.sum(tri_area[:, None] * tri_centroid, axis=0) / np.sum(tri_area)
+    return normal, centroid
+
+
+def tessellated_hemisphere(
+    radius: float = 1.0, n_rings: int = 6, n_segments: int = 16, center=(0.0, 0.0, 0.0)
+) -> Facets:
+    """A hemisphere of flat facets resting on the plane z = center[2].
+
+    Parameters
+    ----------
+    radius : float
+        Radius of the circumscribed sphere [m].
+    n_rings : int
+        Rings of facets from the equator to the pole (the top ring is a fan
+        of triangles).
+    n_segments : int
+        Facets around each ring.
+    center : sequence of 3 float
+        Centre of the equator circle, world frame [m].
+
+    Returns
+    -------
+    Facets
+        ``n_rings * n_segments`` facets numbered from 1, ring by ring from
+        the equator, anticlockwise from east seen from above.
+    """
+    if n_rings < 1 or n_segments < 3:
+        raise ValueError(f"need n_rings >= 1 and n_segments >= 3, got {n_rings}, {n_segments}")
+    if not radius > 0:
+        raise ValueError(f"radius must be positive, got {radius}")
+    c = np.asarray(center, dtype=float)
+    elev = np.linspace(0.0, np.pi / 2, n_rings + 1)  # ring boundaries, elevation [rad]
+    azim = np.linspace(0.0, 2 * np.pi, n_segments + 1)
+
+    def point(e, a):
+        return c + radius * np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+    polygons = []
+    for i in range(n_rings):
+        for j in range(n_segments):
+            e0, e1, a0, a1 = elev[i], elev[i + 1], azim[j], azim[j + 1]
+            if i == n_rings - 1:
+                poly = [point(e0, a0), point(e0, a1), point(e1, a0)]  # apex
+            else:
+                poly = [point(e0, a0), point(e0, a1), point(e1, a1), point(e1, a0)]
+            polygons.append(np.array(poly))
+    normals, centers = zip(*(_polygon_normal_centroid(p) for p in polygons), strict=True)
+    ids = np.arange(1, len(polygons) + 1)
+    return Facets(ids, np.array(normals), np.array(centers), polygons)
+
+
+def camera_position(bearing: float | str, distance: float = 10.0, height: float = 2.0) -> np.ndarray:
+    """World position of a camera standing at a bearing from the origin.
+
+    Parameters
+    ----------
+    bearing : float or str
+        Degrees clockwise from north, or one of the paper's views
+        ``"W", "SW", "S", "SE", "E"``.
+    distance : float
+        Horizontal distance from the origin [m].
+    height : float
+        Height above the ground plane [m].
+    """
+    if isinstance(bearing, str):
+        try:
+            bearing = CAMERA_AZIMUTHS[bearing.upper()]
+        except KeyError:
+            raise ValueError(
+                f"unknown view {bearing!r}; valid: {', '.join(CAMERA_AZIMUTHS)}"
+            ) from None
+    b = np.radians(bearing)
+    return np.array([distance * np.sin(b), distance * np.cos(b), height])
+
+
+def view_directions(center: np.ndarray, camera_position: np.ndarray) -> np.ndarray:
+    """Unit vectors from facet points toward the camera, shape (..., 3)."""
+    d = np.asarray(camera_position, dtype=float) - np.asarray(center, dtype=float)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)

@@ -1,0 +1,531 @@
+"""Facet forward model: the radiance each facet sends toward the camera in each frame.
+
+A facet f with outward normal ``n_f`` seen from the camera along the unit
+vector ``v_f`` (facet toward camera) reflects (paper, eq. 2)
+
+    L_f(t) = integral over the sphere of f_r(w, v_f) L_in(w, t) cos(theta_w) dw,
+
+with ``L_in`` the radiance arriving from direction ``w``: the sun disc, the
+sky above the horizon and the ground below it. For the gloss model
+rho = (1 - gamma) diffuse + gamma glossy (paper, eq. 4) the prediction is
+linear in the incident radiance, so it factors into two bases that depend on
+geometry and sky only,
+
+    L_f(t) = s [(1 - gamma) D_f(t) + gamma G_f(t; n)],
+
+with ``D_f`` the radiance of a white Lambertian facet (irradiance / pi) and
+``G_f(t; n)`` the radiance of a white glossy lobe of exponent n. They are
+computed once per sequence and sky (:func:`facet_bases`) and the likelihood
+evaluates predictions from them without redoing any quadrature.
+
+Quadratures
+-----------
+Diffuse: a ring grid over the whole sphere (:func:`sphere_quadrature`) whose
+ring boundary lies on the horizon, so the step from sky to ground radiance
+falls on cell edges; the sun disc is added in closed form.
+Glossy: lobe-centred coordinates. For the lobe density
+p_n(alpha) = (n + 1) cos^n(alpha) / (2 pi) about the mirror direction, the
+substitution u = cos^(n+1)(alpha) makes the lobe measure uniform,
+p_n dw = du dbeta / (2 pi), so Gauss-Legendre nodes in u and equal steps in
+beta integrate any lobe width with the same few nodes. The sun is added with
+the lobe averaged over the disc (a non-central chi-square probability for
+narrow lobes).
+
+Glossy lobes
+------------
+``lobe="phong"`` (default): f_glossy = p_n(alpha) / cos(theta_i) for
+incident directions above the facet, i.e. Phong's original specular term
+(Phong 1975), normalised so that the lobe's directional albedo is one (less
+the part cut off by the facet's tangent plane). Its large-n limit is a mirror
+that reflects the radiance of the mirror direction unchanged, so gamma is the
+fraction of reflected energy in the lobe in the same sense as Radiance's
+specularity (see :func:`bayesgloss.reflectance.gloss_of_radiance_material`).
+``lobe="lafortune"``: the energy-normalised, reciprocal Phong of Lewis (1994)
+and Lafortune & Willems (1994), f_glossy = (n + 2) cos^n(alpha) / (2 pi); its
+large-n limit reflects cos(theta_r) times the mirror radiance.
+
+Ground
+------
+``ground="plane"``: below the horizon the facet sees a Lambertian ground plane
+of reflectance ``ground_reflectance`` lit by sun and sky (radiance
+rho_g E_h / pi, with E_h the horizontal irradiance from the same quadrature);
+the object's shadow on the ground is neglected. ``ground="sky"``: the sky
+model's own value below the horizon (gensky's and gendaylit's ground glow,
+as in a Radiance scene with no ground plane).
+
+Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from . import reflectance
+from .geometry import Facets, view_directions
+
+__all__ = [
+    "ViewGeometry",
+    "view_geometry",
+    "sphere_quadrature",
+    "incident_radiance",
+    "diffuse_components",
+    "diffuse_basis",
+    "glossy_basis",
+    "mirror_radiance",
+    "FacetBases",
+    "facet_bases",
+    "radiance_material_prediction",
+    "paper_point_sun",
+    "DEFAULT_EXPONENTS",
+]
+
+#: Default exponent table for the glossy basis: log-spaced over 1..1e4,
+#: 6 nodes a decade.
+DEFAULT_EXPONENTS = np.logspace(0.0, 4.0, 25)
+
+GROUND_MODES = ("plane", "sky")
+LOBES = ("phong", "lafortune")
+
+
+@dataclass(frozen=True)
+class ViewGeometry:
+    """Facet normals and the directions toward the camera.
+
+    Attributes
+    ----------
+    normal : ndarray (F, 3)
+        Outward unit normals.
+    view_direction : ndarray (F, 3)
+        Unit vectors from each facet point toward the camera.
+    """
+
+    normal: np.ndarray
+    view_direction: np.ndarray
+
+    @property
+    def mirror_direction(self) -> np.ndarray:
+        """Mirror direction of the view about the normal, (F, 3)."""
+        return reflectance.mirror_direction(self.view_direction, self.normal)
+
+    @property
+    def cos_view(self) -> np.ndarray:
+        """Cosine between normal and view direction, (F,)."""
+        return np.einsum("...i,...i->...", self.normal, self.view_direction)
+
+    def __len__(self) -> int:
+        return len(self.normal)
+
+
+def view_geometry(facets: Facets, camera_position) -> ViewGeometry:
+    """Normals and view directions of facets seen from a camera position [m]."""
+    normal = np.asarray(facets.normal, dtype=float)
+    return ViewGeometry(normal, view_directions(facets.center, camera_position))
+
+
+def sphere_quadrature(resolution: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Ring grid over the whole sphere with the horizon on a ring boundary.
+
+    Rings of equal polar width; each ring is cut into cells of about equal
+    width in azimuth (staggered from ring to ring); each cell is represented
+    by its centre and weighted by its exact solid angle, so the weights sum
+    to 4 pi exactly.
+
+    Parameters
+    ----------
+    resolution : float
+        Polar width of a ring [deg]; 180 / resolution is rounded to an even
+        number of rings.
+
+    Returns
+    -------
+    directions : ndarray (K, 3)
+        Cell centres, unit vectors.
+    solid_angle : ndarray (K,)
+        Cell solid angles [sr].
+    """
+    if not 0.05 <= resolution <= 30:
+        raise ValueError(f"resolution must be within [0.05, 30] deg, got {resolution}")
+    n_rings = 2 * max(1, round(90.0 / resolution))
+    theta_edges = np.linspace(0.0, np.pi, n_rings + 1)
+    dirs, weights = [], []
+    for i in range(n_rings):
+        t0, t1 = theta_edges[i], theta_edges[i + 1]
+        tm = 0.5 * (t0 + t1)
+        n_phi = max(4, round(2 * np.pi * np.sin(tm) / (t1 - t0)))
+        phi = (np.arange(n_phi) + 0.5 * (1 + i % 2)) * (2 * np.pi / n_phi)
+        st = np.sin(tm)
+        dirs.append(np.stack([st * np.cos(phi), st * np.sin(phi), np.full(n_phi, np.cos(tm))], -1))
+        weights.append(np.full(n_phi, (np.cos(t0) - np.cos(t1)) * 2 * np.pi / n_phi))
+    return np.concatenate(dirs), np.concatenate(weights)
+
+
+def _check_ground(ground: str) -> None:
+    if ground not in GROUND_MODES:
+        raise ValueError(f"unknown ground {ground!r}; valid: {', '.join(GROUND_MODES)}")
+
+
+def _sun_terms(sky) -> tuple[np.ndarray, np.ndarray]:
+    """Sun directions (T, 3) and the normal irradiance of the disc (T,) [W m^-2]."""
+    sun = np.asarray(sky.sun_direction, dtype=float)
+    e_sun = np.asarray(sky.solar_radiance, dtype=float) * sky.sun_solid_angle
+    return sun, np.where(sun[:, 2] > 0, e_sun, 0.0)
+
+
+def incident_radiance(
+    sky, directions, *, ground: str = "plane", ground_reflectance: float = 0.2, quadrature=None
+) -> np.ndarray:
+    """Radiance arriving from directions, for every frame.
+
+    Parameters
+    ----------
+    sky : bayesgloss.sky.DaylightSky
+        Sky and sun for T frames.
+    directions : array_like (..., 3)
+        Unit vectors toward the sky or ground.
+    ground : {"plane", "sky"}
+        Ground model (module docstring).
+    ground_reflectance : float
+        Albedo of the ground plane (``ground="plane"`` only) [-].
+    quadrature : tuple, optional
+        ``(directions, solid_angle)`` used to integrate the horizontal
+        irradiance that lights the ground plane; default
+        ``sphere_quadrature(1.0)``.
+
+    Returns
+    -------
+    ndarray (..., T)
+        Radiance [W sr^-1 m^-2]; the sun disc is not included.
+    """
+    _check_ground(ground)
+    d = np.asarray(directions, dtype=float)
+    radiance = sky.radiance(d)
+    if ground == "plane":
+        l_ground = ground_plane_radiance(sky, ground_reflectance, quadrature)
+        radiance = np.where(d[..., 2:3] < 0, l_ground, radiance)
+    return radiance
+
+
+def ground_plane_radiance(sky, ground_reflectance: float = 0.2, quadrature=None) -> np.ndarray:
+    """Radiance of a Lambertian ground plane lit by the sun and the sky, (T,).
+
+    L_g = rho_g E_h / pi with E_h the horizontal irradiance: the sky above
+    the horizon integrated on ``quadrature`` plus the sun disc.
+    """
+    if not 0 <= ground_reflectance <= 1:
+        raise ValueError(f"ground_reflectance must be within [0, 1], got {ground_reflectance}")
+    dirs, omega = quadrature if quadrature is not None else sphere_quadrature(1.0)
+    up = dirs[:, 2] > 0
+    sky_h = (dirs[up, 2] * omega[up]) @ sky.radiance(dirs[up])
+    sun, e_sun = _sun_terms(sky)
+    e_h = sky_h + e_sun * np.maximum(sun[:, 2], 0.0)
+    return ground_reflectance * e_h / np.pi
+
+
+def diffuse_components(
+    geometry: ViewGeometry,
+    sky,
+    *,
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    resolution: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Radiance of white Lambertian facets, split into sky-and-ground and sun.
+
+    Parameters
+    ----------
+    geometry : ViewGeometry
+        F facets.
+    sky : bayesgloss.sky.DaylightSky
+        T frames.
+    ground, ground_reflectance
+        See :func:`incident_radiance`.
+    resolution : float
+        Ring width of the sphere quadrature [deg].
+
+    Returns
+    -------
+    sky_part, sun_part : ndarray (F, T)
+        E / pi for the diffuse (sky and ground) and direct (sun disc)
+        irradiance on each facet [W sr^-1 m^-2].
+    """
+    quad = sphere_quadrature(resolution)
+    dirs, omega = quad
+    radiance = incident_radiance(
+        sky, dirs, ground=ground, ground_reflectance=ground_reflectance, quadrature=quad
+    )  # (K, T)
+    weights = np.maximum(geometry.normal @ dirs.T, 0.0) * (omega / np.pi)  # (F, K)
+    sky_part = weights @ radiance
+    sun, e_sun = _sun_terms(sky)
+    cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
+    return sky_part, cos_i * e_sun / np.pi
+
+
+def diffuse_basis(geometry: ViewGeometry, sky, **kwargs) -> np.ndarray:
+    """D_f(t): radiance of white Lambertian facets, (F, T) [W sr^-1 m^-2].
+
+    Keyword arguments as :func:`diffuse_components`.
+    """
+    sky_part, sun_part = diffuse_components(geometry, sky, **kwargs)
+    return sky_part + sun_part
+
+
+def _orthonormal_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing ``axis`` (..., 3) to a right-handed frame."""
+    helper = np.where(np.abs(axis[..., 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    t1 = np.cross(helper, axis)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    return t1, np.cross(axis, t1)
+
+
+def _lobe_on_sun(cos_alpha, alpha_rad, exponent, sun_radius_rad):
+    """Lobe density p_n averaged over the sun disc [sr^-1].
+
+    Broad lobes: the density at the disc centre. Narrow lobes (n >= 100,
+    small-angle regime) p_n ~ (n+1)/(2 pi) exp(-n alpha^2 / 2), whose
+    integral over a disc of radius r at offset d is ((n+1)/n) P(|X| < r) for
+    X ~ N(d, I/n) in the plane: a non-central chi-square with 2 degrees of
+    freedom.
+    """
+    n = exponent
+    point = (n + 1) / (2 * np.pi) * np.maximum(cos_alpha, 0.0) ** n
+    omega = np.pi * sun_radius_rad**2
+    with np.errstate(over="ignore", invalid="ignore"):
+        disc = (n + 1) / n * stats.ncx2.cdf(n * sun_radius_rad**2, 2, n * alpha_rad**2) / omega
+    return np.where(n >= 100, disc, point)
+
+
+def glossy_basis(
+    geometry: ViewGeometry,
+    sky,
+    exponents=DEFAULT_EXPONENTS,
+    *,
+    lobe: str = "phong",
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    n_u: int = 12,
+    n_beta: int = 16,
+    chunk: int = 32,
+) -> np.ndarray:
+    """G_f(t; n): radiance of white glossy facets for each exponent.
+
+    Parameters
+    ----------
+    geometry : ViewGeometry
+        F facets.
+    sky : bayesgloss.sky.DaylightSky
+        T frames.
+    exponents : array_like (N,)
+        Phong exponents n >= 0 [-].
+    lobe : {"phong", "lafortune"}
+        Lobe normalisation (module docstring).
+    ground, ground_reflectance
+        See :func:`incident_radiance`.
+    n_u, n_beta : int
+        Lobe quadrature: Gauss-Legendre nodes in u = cos^(n+1)(alpha) and
+        equal steps in azimuth about the mirror direction.
+    chunk : int
+        Facets per vectorised block (bounds memory).
+
+    Returns
+    -------
+    ndarray (F, N, T)
+        [W sr^-1 m^-2].
+    """
+    if lobe not in LOBES:
+        raise ValueError(f"unknown lobe {lobe!r}; valid: {', '.join(LOBES)}")
+    _check_ground(ground)
+    n = np.atleast_1d(np.asarray(exponents, dtype=float))
+    if np.any(~np.isfinite(n)) or np.any(n < 0):
+        raise ValueError(f"exponents must be finite and >= 0, got {exponents}")
+    normal = geometry.normal
+    mirror = geometry.mirror_direction
+    t1, t2 = _orthonormal_frame(mirror)
+
+    u, wu = np.polynomial.legendre.leggauss(n_u)
+    u, wu = 0.5 * (u + 1.0), 0.5 * wu  # nodes and weights on [0, 1]
+    beta = (np.arange(n_beta) + 0.5) * (2 * np.pi / n_beta)
+    cos_a = u[None, :] ** (1.0 / (n[:, None] + 1.0))  # (N, U)
+    sin_a = np.sqrt(np.maximum(1.0 - cos_a**2, 0.0))
+    weight = wu / n_beta  # per node: du dbeta / (2 pi)
+
+    l_ground = None
+    if ground == "plane":
+        l_ground = ground_plane_radiance(sky, ground_reflectance)
+    sun, e_sun = _sun_terms(sky)
+    sun_radius = np.sqrt(sky.sun_solid_angle / np.pi)  # small-angle disc radius [rad]
+
+    out = np.empty((len(normal), len(n), len(sun)))
+    for lo in range(0, len(normal), chunk):
+        sl = slice(lo, lo + chunk)
+        # node directions (C, N, U, B, 3)
+        ring = (
+            np.cos(beta)[:, None] * t1[sl, None, :] + np.sin(beta)[:, None] * t2[sl, None, :]
+        )  # (C, B, 3)
+        dirs = (
+            cos_a[None, :, :, None, None] * mirror[sl, None, None, None, :]
+            + sin_a[None, :, :, None, None] * ring[:, None, None, :, :]
+        )
+        cos_i = np.einsum("cnubk,ck->cnub", dirs, normal[sl])
+        if lobe == "phong":
+            h = (cos_i > 0).astype(float)
+        else:
+            h = np.maximum(cos_i, 0.0) * ((n + 2.0) / (n + 1.0))[None, :, None, None]
+        radiance = sky.radiance(dirs)  # (C, N, U, B, T)
+        if l_ground is not None:
+            radiance = np.where(dirs[..., 2:3] < 0, l_ground, radiance)
+        out[sl] = np.einsum("cnub,cnubt,u->cnt", h, radiance, weight)
+
+        # sun disc: lobe averaged over the disc times the disc's irradiance
+        cos_s = np.clip(mirror[sl] @ sun.T, -1.0, 1.0)  # (C, T)
+        cos_is = normal[sl] @ sun.T  # (C, T)
+        p = _lobe_on_sun(
+            cos_s[:, None, :], np.arccos(cos_s)[:, None, :], n[None, :, None], sun_radius
+        )
+        if lobe == "phong":
+            h_s = (cos_is > 0).astype(float)[:, None, :]
+        else:
+            h_s = np.maximum(cos_is, 0.0)[:, None, :] * ((n + 2.0) / (n + 1.0))[None, :, None]
+        out[sl] += p * h_s * e_sun[None, None, :]
+    return out
+
+
+def mirror_radiance(
+    geometry: ViewGeometry, sky, *, ground: str = "plane", ground_reflectance: float = 0.2
+) -> np.ndarray:
+    """Radiance seen in each facet's mirror direction, (F, T) [W sr^-1 m^-2].
+
+    The limit of a glossy lobe as n -> infinity, and what a Radiance material
+    of roughness 0 reflects specularly. The sun contributes its disc radiance
+    where the mirror direction falls inside the disc.
+    """
+    mirror = geometry.mirror_direction
+    radiance = incident_radiance(
+        sky, mirror, ground=ground, ground_reflectance=ground_reflectance
+    )  # (F, T)
+    sun = np.asarray(sky.sun_direction, dtype=float)
+    cos_disc = np.cos(np.sqrt(sky.sun_solid_angle / np.pi))
+    in_disc = (mirror @ sun.T) >= cos_disc
+    return radiance + np.where(in_disc, np.asarray(sky.solar_radiance, dtype=float), 0.0)
+
+
+@dataclass(frozen=True)
+class FacetBases:
+    """Diffuse and glossy bases of F facets over T frames.
+
+    Attributes
+    ----------
+    diffuse : ndarray (F, T)
+        D_f(t) [W sr^-1 m^-2].
+    glossy : ndarray (F, N, T)
+        G_f(t; n) on the exponent table [W sr^-1 m^-2].
+    exponents : ndarray (N,)
+        The exponent table, increasing.
+    """
+
+    diffuse: np.ndarray
+    glossy: np.ndarray
+    exponents: np.ndarray
+
+    def glossy_at(self, exponent) -> np.ndarray:
+        """G_f(t; n) for any n in the table's range, linear in log n, (F, T)."""
+        x = np.log(self.exponents)
+        xi = np.log(np.clip(exponent, self.exponents[0], self.exponents[-1]))
+        j = np.clip(np.searchsorted(x, xi) - 1, 0, len(x) - 2)
+        w = (xi - x[j]) / (x[j + 1] - x[j])
+        return (1 - w) * self.glossy[:, j, :] + w * self.glossy[:, j + 1, :]
+
+    def predict(self, gloss: float, exponent: float, scale: float = 1.0) -> np.ndarray:
+        """s [(1 - gamma) D + gamma G(n)], (F, T) [W sr^-1 m^-2] (paper, eq. 4)."""
+        return scale * ((1 - gloss) * self.diffuse + gloss * self.glossy_at(exponent))
+
+
+def facet_bases(
+    geometry: ViewGeometry,
+    sky,
+    exponents=DEFAULT_EXPONENTS,
+    *,
+    lobe: str = "phong",
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    resolution: float = 1.0,
+) -> FacetBases:
+    """Diffuse and glossy bases for a sequence: the forward model's one quadrature."""
+    exps = np.sort(np.atleast_1d(np.asarray(exponents, dtype=float)))
+    common = dict(ground=ground, ground_reflectance=ground_reflectance)
+    d = diffuse_basis(geometry, sky, resolution=resolution, **common)
+    g = glossy_basis(geometry, sky, exps, lobe=lobe, **common)
+    return FacetBases(d, g, exps)
+
+
+def radiance_material_prediction(
+    geometry: ViewGeometry,
+    sky,
+    kind: str,
+    colour,
+    specularity: float,
+    roughness: float = 0.0,
+    *,
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    resolution: float = 1.0,
+) -> np.ndarray:
+    """Radiance toward the camera of facets made of a Radiance material, (F, T).
+
+    Radiance's ``plastic`` and ``metal`` of roughness 0 as its ``normal.c``
+    shades them (see :func:`bayesgloss.reflectance.radiance_material`):
+    diffuse reflectance with Fresnel reduction for sky and sun, plus a mirror
+    reflection of the Fresnel-raised specularity.
+
+    Parameters
+    ----------
+    kind : {"plastic", "metal"}
+    colour : float
+        Grey reflectance (luminance of the material colour) [-].
+    specularity, roughness : float
+        Radiance's material arguments [-]; only roughness 0 is modelled.
+    """
+    if roughness != 0:
+        raise ValueError(
+            f"roughness {roughness}: only Radiance's roughness-0 (mirror) materials are "
+            "modelled by radiance_material_prediction"
+        )
+    sun, _ = _sun_terms(sky)
+    cos_incident = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
+    mat = reflectance.radiance_material(
+        kind, colour, specularity, roughness, geometry.cos_view[:, None], cos_incident
+    )
+    common = dict(ground=ground, ground_reflectance=ground_reflectance)
+    sky_part, sun_part = diffuse_components(geometry, sky, resolution=resolution, **common)
+    out = mat.diffuse_ambient * sky_part + mat.diffuse_direct * sun_part
+    if np.any(np.asarray(mat.specular) > 0):
+        out = out + mat.specular * mirror_radiance(geometry, sky, **common)
+    return out
+
+
+def paper_point_sun(geometry: ViewGeometry, sun_direction, gloss, exponent) -> np.ndarray:
+    """The paper's prediction: a point sun of unit radiance, no sky (eqs. 2, 4-6).
+
+    L_f(t) = cos(theta_i) [(1 - gamma) + gamma cos^n(Phi)], Phi the angle
+    between the view direction and the mirror direction of the sun, zero
+    when the sun is below the horizon or behind the facet.
+
+    Parameters
+    ----------
+    sun_direction : array_like (T, 3)
+    gloss, exponent : float or array_like
+        Broadcast against the trailing (F, T) result.
+
+    Returns
+    -------
+    ndarray (..., F, T)
+        Relative radiance [-].
+    """
+    sun = np.asarray(sun_direction, dtype=float)
+    normal = geometry.normal[:, None, :]
+    view = geometry.view_direction[:, None, :]
+    rho = reflectance.phong_paper(sun[None, :, :], view, normal, gloss, exponent)
+    cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
+    return np.where(sun[None, :, 2] > 0, rho * cos_i, 0.0)

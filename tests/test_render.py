@@ -1,0 +1,167 @@
+"""Forward model: quadratures against closed forms and brute force, and Radiance."""
+
+import numpy as np
+import pytest
+
+from bayesgloss import render
+from bayesgloss.render import ViewGeometry
+
+
+def _geometry(normals, views):
+    n = np.asarray(normals, float)
+    v = np.asarray(views, float)
+    return ViewGeometry(
+        n / np.linalg.norm(n, axis=-1, keepdims=True), v / np.linalg.norm(v, axis=-1, keepdims=True)
+    )
+
+
+def _random_units(rng, k):
+    x = rng.normal(size=(k, 3))
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def test_sphere_quadrature_exact_moments():
+    dirs, w = render.sphere_quadrature(1.0)
+    np.testing.assert_allclose(w.sum(), 4 * np.pi, rtol=1e-12)
+    # the horizon is a ring boundary: the upper cells hold exactly 2 pi
+    np.testing.assert_allclose(w[dirs[:, 2] > 0].sum(), 2 * np.pi, rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    # second moments: integral of z^2 and x^2 over the sphere = 4 pi / 3
+    np.testing.assert_allclose(w @ dirs[:, 2] ** 2, 4 * np.pi / 3, rtol=1e-4)
+    np.testing.assert_allclose(w @ dirs[:, 0] ** 2, 4 * np.pi / 3, rtol=1e-3)
+
+
+@pytest.mark.parametrize("resolution", [2.0, 1.0, 0.5])
+def test_cosine_integral_converges(resolution):
+    # integral of max(0, n.w) over the sphere is pi for every normal n; the error
+    # comes from the kink at the facet horizon and shrinks as resolution^2
+    rng = np.random.default_rng(1)
+    normals = _random_units(rng, 50)
+    dirs, w = render.sphere_quadrature(resolution)
+    got = np.maximum(normals @ dirs.T, 0) @ w
+    np.testing.assert_allclose(got, np.pi, rtol=2e-4 * resolution**2)
+
+
+def test_uniform_sky_white_lambert_is_the_sky_level(uniform_sky):
+    rng = np.random.default_rng(2)
+    g = _geometry(_random_units(rng, 20), _random_units(rng, 20))
+    sky = uniform_sky(levels=[1.0, 3.0])
+    d = render.diffuse_basis(g, sky, ground="sky")
+    np.testing.assert_allclose(d, np.broadcast_to([1.0, 3.0], (20, 2)), rtol=1e-3)
+
+
+def test_ground_plane_radiance_and_tilted_facet(uniform_sky):
+    # uniform sky L above the horizon: horizontal irradiance pi L, ground rho L;
+    # a vertical facet sees half sky and half ground: D = L (1 + rho) / 2
+    sky = uniform_sky(levels=[2.0])
+    lg = render.ground_plane_radiance(sky, 0.3)
+    np.testing.assert_allclose(lg, [0.6], rtol=1e-4)
+    g = _geometry([[1, 0, 0], [0, 0, 1], [0, 0, -1]], [[1, 0, 0.2]] * 3)
+    d = render.diffuse_basis(g, sky, ground="plane", ground_reflectance=0.3)
+    np.testing.assert_allclose(d[:, 0], [2 * 1.3 / 2, 2.0, 0.6], rtol=1e-3)
+
+
+def test_sun_term_is_cosine_law(uniform_sky):
+    sun = np.array([[0.0, -0.6, 0.8], [0.0, 0.6, 0.8], [0.0, 0.6, -0.8]])
+    sky = uniform_sky(levels=[0.0, 0.0, 0.0], sun=sun, solar_radiance=1e6)
+    g = _geometry([[0, -1, 0], [0, 0, 1]], [[0, -1, 0.1], [0, 0, 1]])
+    _, sun_part = render.diffuse_components(g, sky, ground="sky")
+    e = 1e6 * sky.sun_solid_angle / np.pi
+    expected = np.array([[0.6 * e, 0.0, 0.0], [0.8 * e, 0.8 * e, 0.0]])  # below horizon: 0
+    np.testing.assert_allclose(sun_part, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("lobe", ["phong", "lafortune"])
+def test_glossy_head_on_uniform_sky_is_one(uniform_sky, lobe):
+    # viewed along the normal the lobe lies wholly above the facet; both lobes are
+    # normalised so that a white lobe under uniform radiance L reflects L
+    g = _geometry([[0, 0, 1], [0.6, 0, 0.8]], [[0, 0, 1], [0.6, 0, 0.8]])
+    sky = uniform_sky(levels=[1.0])
+    gl = render.glossy_basis(g, sky, [1.0, 10.0, 300.0, 1e4], lobe=lobe, ground="sky")
+    np.testing.assert_allclose(gl[..., 0], 1.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("lobe", ["phong", "lafortune"])
+@pytest.mark.parametrize("exponent", [2.0, 8.0, 40.0])
+def test_glossy_lobe_quadrature_matches_brute_force(smooth_sky, lobe, exponent):
+    # brute force: the lobe BRDF integrated on a fine sphere grid
+    rng = np.random.default_rng(3)
+    normals = _random_units(rng, 6)
+    normals[:, 2] = np.abs(normals[:, 2])
+    views = normals + 0.7 * _random_units(rng, 6)
+    views /= np.linalg.norm(views, axis=1, keepdims=True)
+    g = _geometry(normals, views)
+    got = render.glossy_basis(g, smooth_sky, [exponent], lobe=lobe, ground="sky", n_u=24,
+                              n_beta=48)[:, 0, :]
+    dirs, w = render.sphere_quadrature(0.25)
+    cos_i = normals @ dirs.T
+    cos_a = np.maximum(g.mirror_direction @ dirs.T, 0)
+    if lobe == "phong":
+        kern = (exponent + 1) / (2 * np.pi) * cos_a**exponent * (cos_i > 0)
+    else:
+        kern = (exponent + 2) / (2 * np.pi) * cos_a**exponent * np.maximum(cos_i, 0)
+    ref = (kern * w) @ smooth_sky.radiance(dirs)
+    np.testing.assert_allclose(got, ref, rtol=2e-3)
+
+
+def test_glossy_default_nodes_converged(smooth_sky):
+    # the default lobe quadrature (12 x 16 nodes) agrees with a 4x denser one
+    rng = np.random.default_rng(4)
+    g = _geometry(np.abs(_random_units(rng, 8)) * [1, 1, 1], _random_units(rng, 8) + [0, 0, 2])
+    exps = [1.0, 5.0, 50.0, 5000.0]
+    coarse = render.glossy_basis(g, smooth_sky, exps, ground="sky")
+    fine = render.glossy_basis(g, smooth_sky, exps, ground="sky", n_u=48, n_beta=64)
+    np.testing.assert_allclose(coarse, fine, rtol=2e-3, atol=1e-4)
+
+
+def test_glossy_large_exponent_tends_to_mirror(smooth_sky):
+    rng = np.random.default_rng(5)
+    normals = np.abs(_random_units(rng, 10)) + [0, 0, 0.5]
+    g = _geometry(normals, normals + 0.5 * _random_units(rng, 10))
+    keep = g.cos_view > 0.3
+    g = ViewGeometry(g.normal[keep], g.view_direction[keep])
+    gl = render.glossy_basis(g, smooth_sky, [1e5], ground="sky")[:, 0, :]
+    mirror = render.mirror_radiance(g, smooth_sky, ground="sky")
+    np.testing.assert_allclose(gl, mirror, rtol=1e-3)
+
+
+def test_sun_in_narrow_lobe_matches_disc_integration():
+    # the sun disc seen through a lobe narrower than the disc: compare the closed
+    # form (non-central chi-square) with a brute-force integration over the disc
+    radius = np.radians(0.2665)
+    n = 2e5
+    offsets = np.radians([0.0, 0.1, 0.25, 0.4])
+    r = np.sqrt(np.linspace(0, 1, 801)[1:] - 0.5 / 800) * radius  # mid-area rings
+    phi = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    x = r[:, None] * np.cos(phi)
+    y = r[:, None] * np.sin(phi)
+    for d in offsets:
+        alpha = np.hypot(x + d, y)
+        brute = np.mean((n + 1) / (2 * np.pi) * np.cos(alpha) ** n)
+        closed = render._lobe_on_sun(np.cos(d), d, n, radius)
+        np.testing.assert_allclose(closed, brute, rtol=5e-3, atol=1e-3 * (n / (2 * np.pi)))
+
+
+def test_paper_point_sun():
+    g = _geometry([[0, -1, 0]], [[-1, -1, 0]])  # south facet seen from south-west
+    sun = np.array([[1, -1, 0.0001], [0.0, -0.6, 0.8], [0.0, 0.6, -0.8]])
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    lam = render.paper_point_sun(g, sun, 0.0, 10.0)
+    np.testing.assert_allclose(lam[0], [sun[0, 1] * -1, 0.6, 0.0], atol=1e-12)
+    gl = render.paper_point_sun(g, sun, 1.0, 10.0)
+    # the first sun is the mirror of the view about the normal: cos Phi = 1
+    np.testing.assert_allclose(gl[0, 0], lam[0, 0], rtol=1e-6)
+    assert gl[0, 1] < lam[0, 1]
+
+
+def test_bad_arguments(uniform_sky):
+    g = _geometry([[0, 0, 1]], [[0, 0, 1]])
+    sky = uniform_sky()
+    with pytest.raises(ValueError, match="lobe 'blinn'"):
+        render.glossy_basis(g, sky, [1.0], lobe="blinn")
+    with pytest.raises(ValueError, match="ground 'lake'"):
+        render.diffuse_basis(g, sky, ground="lake")
+    with pytest.raises(ValueError, match="-3"):
+        render.glossy_basis(g, sky, [-3.0])
+    with pytest.raises(ValueError, match="1.5"):
+        render.ground_plane_radiance(sky, 1.5)
