@@ -135,8 +135,10 @@ def _unit_vectors(value: Any, name: str) -> np.ndarray:
     bad = np.abs(norm - 1.0) > _UNIT_TOLERANCE  # NaN compares False: propagates
     if np.any(bad):
         vec = arr.reshape(-1, 3)[int(np.argmax(np.ravel(bad)))]
-        raise ValueError(f"{name} must be unit vectors; got {vec.tolist()} with norm "
-                         f"{float(np.linalg.norm(vec)):.6g}")
+        raise ValueError(
+            f"{name} must be unit vectors; got {vec.tolist()} with norm "
+            f"{float(np.linalg.norm(vec)):.6g}"
+        )
     return arr
 
 
@@ -168,8 +170,13 @@ def _clamp_sun(sun: np.ndarray, apply: np.ndarray | bool) -> tuple[np.ndarray, n
     # sundir = (-sin(az) cos(alt), -cos(az) cos(alt), sin(alt)).
     azimuth = np.arctan2(-sun[..., 0], -sun[..., 1])
     lowered = np.stack(
-        [-np.sin(azimuth) * np.cos(limit), -np.cos(azimuth) * np.cos(limit),
-         np.full_like(azimuth, np.sin(limit))], axis=-1)
+        [
+            -np.sin(azimuth) * np.cos(limit),
+            -np.cos(azimuth) * np.cos(limit),
+            np.full_like(azimuth, np.sin(limit)),
+        ],
+        axis=-1,
+    )
     return np.where(clamp, limit, altitude), np.where(clamp[..., None], lowered, sun)
 
 
@@ -195,7 +202,8 @@ def _f2_clear(altitude: np.ndarray, sun_z: np.ndarray) -> np.ndarray:
 def _f2_intermediate(altitude: np.ndarray) -> np.ndarray:
     # gensky.c: F2 for the intermediate sky.
     return (2.739 + 0.9891 * np.sin(0.3119 + 2.6 * altitude)) * np.exp(
-        -(np.pi / 2.0 - altitude) * (0.4441 + 1.48 * altitude))
+        -(np.pi / 2.0 - altitude) * (0.4441 + 1.48 * altitude)
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -306,14 +314,17 @@ def gensky_parameters(
     kind = kind.astype(str)
     unknown = ~np.isin(kind, list(_GENSKY_CODES))
     if np.any(unknown):
-        raise ValueError(f"sky_type must be one of {sorted(_GENSKY_CODES)}, "
-                         f"got {kind[unknown].ravel()[0]!r}")
+        raise ValueError(
+            f"sky_type must be one of {sorted(_GENSKY_CODES)}, got {kind[unknown].ravel()[0]!r}"
+        )
     turbidity = np.asarray(turbidity, dtype=float)
     rho = _nonnegative(ground_reflectance, "ground_reflectance")
-    optional = [np.asarray(v, dtype=float) for v in (zenith_radiance, solar_radiance)
-                if v is not None]
-    shape = np.broadcast_shapes(sun.shape[:-1], kind.shape, turbidity.shape, rho.shape,
-                                *(v.shape for v in optional))
+    optional = [
+        np.asarray(v, dtype=float) for v in (zenith_radiance, solar_radiance) if v is not None
+    ]
+    shape = np.broadcast_shapes(
+        sun.shape[:-1], kind.shape, turbidity.shape, rho.shape, *(v.shape for v in optional)
+    )
     sun = np.broadcast_to(sun, shape + (3,))
     kind, turbidity, rho = (np.broadcast_to(v, shape) for v in (kind, turbidity, rho))
 
@@ -325,21 +336,29 @@ def gensky_parameters(
 
     # gensky.c computesky(): normalisation factor, horizontal sky irradiance
     # over (pi x zenith radiance).
-    f2 = np.where(is_clear, _f2_clear(altitude, sun_z),
-                  np.where(is_inter, _f2_intermediate(altitude), np.nan))
+    f2 = np.where(
+        is_clear, _f2_clear(altitude, sun_z), np.where(is_inter, _f2_intermediate(altitude), np.nan)
+    )
     with np.errstate(invalid="ignore"):
         normfactor = np.select(
             [kind == "uniform", kind == "overcast", is_clear, is_inter],
-            [1.0, 0.777778,
-             _normsc(altitude, _NORMSC_CLEAR) / f2 / np.pi,
-             _normsc(altitude, _NORMSC_INTERMEDIATE) / f2 / np.pi],
-            np.nan)
+            [
+                1.0,
+                0.777778,
+                _normsc(altitude, _NORMSC_CLEAR) / f2 / np.pi,
+                _normsc(altitude, _NORMSC_INTERMEDIATE) / f2 / np.pi,
+            ],
+            np.nan,
+        )
 
     if zenith_radiance is None:
         overcast_zenith = 8.6 * sun_z + 0.123  # kcd/m^2, Moon-Spencer-type overcast
         clear_zenith = (1.376 * turbidity - 1.81) * np.tan(altitude) + 0.38  # kcd/m^2
-        zenith = np.select([is_overcast, is_clear], [overcast_zenith, clear_zenith],
-                           (clear_zenith + overcast_zenith) / 2.0)
+        zenith = np.select(
+            [is_overcast, is_clear],
+            [overcast_zenith, clear_zenith],
+            (clear_zenith + overcast_zenith) / 2.0,
+        )
         zenith = np.where(zenith < 0.0, 0.0, zenith * (1000.0 / SKY_EFFICACY))
     else:
         zenith = np.broadcast_to(np.asarray(zenith_radiance, dtype=float), shape).copy()
@@ -431,11 +450,16 @@ def skybright(directions: Any, params: GenskyParameters) -> np.ndarray:
     sunny = a2 * (0.91 + 10.0 * np.exp(-3.0 * gamma) + 0.45 * cosgamma * cosgamma) * gradation / a4
     cloudy = a2 * (1.0 + 2.0 * dz) / 3.0
     uniform = a2 * np.ones_like(dz)
-    inter = (a2 * ((1.35 * np.sin(5.631 - 3.59 * eta) + 3.12) * np.sin(4.396 - 2.6 * zt)
-                   + 6.37 - eta) / 2.326
-             * np.exp(gamma * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)) / a4)
-    sky = np.select([code == 1, code == 2, code == 3, code == 4],
-                    [sunny, cloudy, uniform, inter], np.nan)
+    inter = (
+        a2
+        * ((1.35 * np.sin(5.631 - 3.59 * eta) + 3.12) * np.sin(4.396 - 2.6 * zt) + 6.37 - eta)
+        / 2.326
+        * np.exp(gamma * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812))
+        / a4
+    )
+    sky = np.select(
+        [code == 1, code == 2, code == 3, code == 4], [sunny, cloudy, uniform, inter], np.nan
+    )
     return _ground_blend(dz, sky, a3)
 
 
@@ -449,12 +473,20 @@ def skybright(directions: Any, params: GenskyParameters) -> np.ndarray:
 # copy has e = 0.35 for type 7, a typo: the standard's indicatrix group 3 has
 # e = 0.30).
 _CIE_GRADATION = {
-    "I": (4.0, -0.70), "II": (1.1, -0.80), "III": (0.0, -1.00),
-    "IV": (-1.0, -0.55), "V": (-1.0, -0.32), "VI": (-1.0, -0.15),
+    "I": (4.0, -0.70),
+    "II": (1.1, -0.80),
+    "III": (0.0, -1.00),
+    "IV": (-1.0, -0.55),
+    "V": (-1.0, -0.32),
+    "VI": (-1.0, -0.15),
 }
 _CIE_INDICATRIX = {
-    1: (0.0, -1.0, 0.00), 2: (2.0, -1.5, 0.15), 3: (5.0, -2.5, 0.30),
-    4: (10.0, -3.0, 0.45), 5: (16.0, -3.0, 0.30), 6: (24.0, -2.8, 0.15),
+    1: (0.0, -1.0, 0.00),
+    2: (2.0, -1.5, 0.15),
+    3: (5.0, -2.5, 0.30),
+    4: (10.0, -3.0, 0.45),
+    5: (16.0, -3.0, 0.30),
+    6: (24.0, -2.8, 0.15),
 }
 #: CIE standard general sky types: type -> (gradation group, indicatrix group, description).
 CIE_SKY_TYPES: dict[int, tuple[str, int, str]] = {
@@ -475,8 +507,9 @@ CIE_SKY_TYPES: dict[int, tuple[str, int, str]] = {
     15: ("VI", 6, "white-blue turbid sky with broad solar corona"),
 }
 # (15, 5) table of a, b, c, d, e indexed by type - 1.
-_CIE_TABLE = np.array([_CIE_GRADATION[g] + _CIE_INDICATRIX[i]
-                       for g, i, _ in (CIE_SKY_TYPES[t] for t in range(1, 16))])
+_CIE_TABLE = np.array(
+    [_CIE_GRADATION[g] + _CIE_INDICATRIX[i] for g, i, _ in (CIE_SKY_TYPES[t] for t in range(1, 16))]
+)
 
 
 def _cie_types(sky_type: Any) -> np.ndarray:
@@ -544,8 +577,11 @@ def cie_general(directions: Any, sun_direction: Any, sky_type: Any) -> np.ndarra
     sun_z = sun[..., 2]
     chi = np.arccos(np.clip(np.sum(d * sun, axis=-1), -1.0, 1.0))  # eq. 1
     zenith_sun = np.arccos(np.clip(sun_z, -1.0, 1.0))
-    relative = (_cie_indicatrix(chi, c, dd, e) * _cie_gradation(dz, a, b)
-                / (_cie_indicatrix(zenith_sun, c, dd, e) * (1.0 + a * np.exp(b))))
+    relative = (
+        _cie_indicatrix(chi, c, dd, e)
+        * _cie_gradation(dz, a, b)
+        / (_cie_indicatrix(zenith_sun, c, dd, e) * (1.0 + a * np.exp(b)))
+    )
     return np.where(dz < 0.0, 0.0, relative)
 
 
@@ -556,32 +592,67 @@ def cie_general(directions: Any, sun_direction: Any, sky_type: Any) -> np.ndarra
 # x0 + x1 Z + Delta (x2 + x3 Z) (Z the solar zenith angle in radians), except
 # bin 1's c and d (see perez_coefficients). gendaylit stores the table as C
 # float; the float32 rounding is kept so the coefficients match bit for bit.
-_PEREZ_TABLE = np.array([
-    [[1.3525, -0.2576, -0.2690, -1.4366], [-0.7670, 0.0007, 1.2734, -0.1233],
-     [2.8000, 0.6004, 1.2375, 1.0000], [1.8734, 0.6297, 0.9738, 0.2809],
-     [0.0356, -0.1246, -0.5718, 0.9938]],
-    [[-1.2219, -0.7730, 1.4148, 1.1016], [-0.2054, 0.0367, -3.9128, 0.9156],
-     [6.9750, 0.1774, 6.4477, -0.1239], [-1.5798, -0.5081, -1.7812, 0.1080],
-     [0.2624, 0.0672, -0.2190, -0.4285]],
-    [[-1.1000, -0.2515, 0.8952, 0.0156], [0.2782, -0.1812, -4.5000, 1.1766],
-     [24.7219, -13.0812, -37.7000, 34.8438], [-5.0000, 1.5218, 3.9229, -2.6204],
-     [-0.0156, 0.1597, 0.4199, -0.5562]],
-    [[-0.5484, -0.6654, -0.2672, 0.7117], [0.7234, -0.6219, -5.6812, 2.6297],
-     [33.3389, -18.3000, -62.2500, 52.0781], [-3.5000, 0.0016, 1.1477, 0.1062],
-     [0.4659, -0.3296, -0.0876, -0.0329]],
-    [[-0.6000, -0.3566, -2.5000, 2.3250], [0.2937, 0.0496, -5.6812, 1.8415],
-     [21.0000, -4.7656, -21.5906, 7.2492], [-3.5000, -0.1554, 1.4062, 0.3988],
-     [0.0032, 0.0766, -0.0656, -0.1294]],
-    [[-1.0156, -0.3670, 1.0078, 1.4051], [0.2875, -0.5328, -3.8500, 3.3750],
-     [14.0000, -0.9999, -7.1406, 7.5469], [-3.4000, -0.1078, -1.0750, 1.5702],
-     [-0.0672, 0.4016, 0.3017, -0.4844]],
-    [[-1.0000, 0.0211, 0.5025, -0.5119], [-0.3000, 0.1922, 0.7023, -1.6317],
-     [19.0000, -5.0000, 1.2438, -1.9094], [-4.0000, 0.0250, 0.3844, 0.2656],
-     [1.0468, -0.3788, -2.4517, 1.4656]],
-    [[-1.0500, 0.0289, 0.4260, 0.3590], [-0.3250, 0.1156, 0.7781, 0.0025],
-     [31.0625, -14.5000, -46.1148, 55.3750], [-7.2312, 0.4050, 13.3500, 0.6234],
-     [1.5000, -0.6426, 1.8564, 0.5636]],
-], dtype=np.float32).astype(float)
+_PEREZ_TABLE = np.array(
+    [
+        [
+            [1.3525, -0.2576, -0.2690, -1.4366],
+            [-0.7670, 0.0007, 1.2734, -0.1233],
+            [2.8000, 0.6004, 1.2375, 1.0000],
+            [1.8734, 0.6297, 0.9738, 0.2809],
+            [0.0356, -0.1246, -0.5718, 0.9938],
+        ],
+        [
+            [-1.2219, -0.7730, 1.4148, 1.1016],
+            [-0.2054, 0.0367, -3.9128, 0.9156],
+            [6.9750, 0.1774, 6.4477, -0.1239],
+            [-1.5798, -0.5081, -1.7812, 0.1080],
+            [0.2624, 0.0672, -0.2190, -0.4285],
+        ],
+        [
+            [-1.1000, -0.2515, 0.8952, 0.0156],
+            [0.2782, -0.1812, -4.5000, 1.1766],
+            [24.7219, -13.0812, -37.7000, 34.8438],
+            [-5.0000, 1.5218, 3.9229, -2.6204],
+            [-0.0156, 0.1597, 0.4199, -0.5562],
+        ],
+        [
+            [-0.5484, -0.6654, -0.2672, 0.7117],
+            [0.7234, -0.6219, -5.6812, 2.6297],
+            [33.3389, -18.3000, -62.2500, 52.0781],
+            [-3.5000, 0.0016, 1.1477, 0.1062],
+            [0.4659, -0.3296, -0.0876, -0.0329],
+        ],
+        [
+            [-0.6000, -0.3566, -2.5000, 2.3250],
+            [0.2937, 0.0496, -5.6812, 1.8415],
+            [21.0000, -4.7656, -21.5906, 7.2492],
+            [-3.5000, -0.1554, 1.4062, 0.3988],
+            [0.0032, 0.0766, -0.0656, -0.1294],
+        ],
+        [
+            [-1.0156, -0.3670, 1.0078, 1.4051],
+            [0.2875, -0.5328, -3.8500, 3.3750],
+            [14.0000, -0.9999, -7.1406, 7.5469],
+            [-3.4000, -0.1078, -1.0750, 1.5702],
+            [-0.0672, 0.4016, 0.3017, -0.4844],
+        ],
+        [
+            [-1.0000, 0.0211, 0.5025, -0.5119],
+            [-0.3000, 0.1922, 0.7023, -1.6317],
+            [19.0000, -5.0000, 1.2438, -1.9094],
+            [-4.0000, 0.0250, 0.3844, 0.2656],
+            [1.0468, -0.3788, -2.4517, 1.4656],
+        ],
+        [
+            [-1.0500, 0.0289, 0.4260, 0.3590],
+            [-0.3250, 0.1156, 0.7781, 0.0025],
+            [31.0625, -14.5000, -46.1148, 55.3750],
+            [-7.2312, 0.4050, 13.3500, 0.6234],
+            [1.5000, -0.6426, 1.8564, 0.5636],
+        ],
+    ],
+    dtype=np.float32,
+).astype(float)
 # Upper clearness bounds of bins 1..7 (Perez et al. 1990, Table 1).
 _PEREZ_BIN_EDGES = np.array([1.065, 1.230, 1.500, 1.950, 2.800, 4.500, 6.200])
 # gendaylit check_parametrization(): the range epsilon and Delta are clipped to.
@@ -592,18 +663,22 @@ _DELTA_RANGE = (0.01, 0.6)
 # = a + b W + c cos Z + d ln(Delta) (diffuse horizontal) and
 # = a + b W + c exp(5.73 Z - 5) + d Delta (direct normal), per clearness bin,
 # rows a, b, c, d.
-_DIFFUSE_EFFICACY = np.array([
-    [97.24, 107.22, 104.97, 102.39, 100.71, 106.42, 141.88, 152.23],
-    [-0.46, 1.15, 2.96, 5.59, 5.94, 3.83, 1.90, 0.35],
-    [12.00, 0.59, -5.53, -13.95, -22.75, -36.15, -53.24, -45.27],
-    [-8.91, -3.95, -8.77, -13.90, -23.74, -28.83, -14.03, -7.98],
-])
-_DIRECT_EFFICACY = np.array([
-    [57.20, 98.99, 109.83, 110.34, 106.36, 107.19, 105.75, 101.18],
-    [-4.55, -3.46, -4.90, -5.84, -3.97, -1.25, 0.77, 1.58],
-    [-2.98, -1.21, -1.71, -1.99, -1.75, -1.51, -1.26, -1.10],
-    [117.12, 12.38, -8.81, -4.56, -6.16, -26.73, -34.44, -8.29],
-])
+_DIFFUSE_EFFICACY = np.array(
+    [
+        [97.24, 107.22, 104.97, 102.39, 100.71, 106.42, 141.88, 152.23],
+        [-0.46, 1.15, 2.96, 5.59, 5.94, 3.83, 1.90, 0.35],
+        [12.00, 0.59, -5.53, -13.95, -22.75, -36.15, -53.24, -45.27],
+        [-8.91, -3.95, -8.77, -13.90, -23.74, -28.83, -14.03, -7.98],
+    ]
+)
+_DIRECT_EFFICACY = np.array(
+    [
+        [57.20, 98.99, 109.83, 110.34, 106.36, 107.19, 105.75, 101.18],
+        [-4.55, -3.46, -4.90, -5.84, -3.97, -1.25, 0.77, 1.58],
+        [-2.98, -1.21, -1.71, -1.99, -1.75, -1.51, -1.26, -1.10],
+        [117.12, 12.38, -8.81, -4.56, -6.16, -26.73, -34.44, -8.29],
+    ]
+)
 
 # gendaylit's integration grid: the 145 Tregenza patch centres (zenith angle
 # theta, azimuth phi from the sun's azimuth, deg), each weighted 2 pi / 145.
@@ -656,16 +731,20 @@ def perez_coefficients(epsilon: Any, delta: Any, solar_zenith: Any) -> PerezCoef
     bad = (eps < _EPSILON_RANGE[0]) | (eps >= _EPSILON_RANGE[1])
     if np.any(bad):
         raise ValueError(f"epsilon must lie in [1, 12.01), got {eps[bad].ravel()[0]!r}")
-    eps, dlt, zen = np.broadcast_arrays(eps, np.asarray(delta, dtype=float),
-                                        np.asarray(solar_zenith, dtype=float))
+    eps, dlt, zen = np.broadcast_arrays(
+        eps, np.asarray(delta, dtype=float), np.asarray(solar_zenith, dtype=float)
+    )
     z = np.deg2rad(zen)
     dlt = np.where((eps > 1.065) & (eps < 2.8) & (dlt < 0.2), 0.2, dlt)
     # gendaylit's get_numlin(float epsilon): bin from epsilon as a C float.
     eps32 = eps.astype(np.float32).astype(float)
     index = np.searchsorted(_PEREZ_BIN_EDGES, np.where(np.isnan(eps32), 1.0, eps32), side="right")
     x = _PEREZ_TABLE[index]  # (..., 5, 4)
-    linear = (x[..., 0] + x[..., 1] * z[..., None]
-              + dlt[..., None] * (x[..., 2] + x[..., 3] * z[..., None]))
+    linear = (
+        x[..., 0]
+        + x[..., 1] * z[..., None]
+        + dlt[..., None] * (x[..., 2] + x[..., 3] * z[..., None])
+    )
     a, b, c, d, e = np.moveaxis(linear, -1, 0)
     first = index == 0
     if np.any(first):
@@ -737,8 +816,13 @@ def perez_1993(directions: Any, sun_direction: Any, epsilon: Any, delta: Any) ->
 def _eccentricity(day_of_year: np.ndarray) -> np.ndarray:
     # gendaylit get_eccentricity(): Spencer (1971) series for (R0/R)^2.
     angle = 2.0 * np.pi * (day_of_year - 1.0) / 365.0
-    return (1.00011 + 0.034221 * np.cos(angle) + 0.00128 * np.sin(angle)
-            + 0.000719 * np.cos(2 * angle) + 0.000077 * np.sin(2 * angle))
+    return (
+        1.00011
+        + 0.034221 * np.cos(angle)
+        + 0.00128 * np.sin(angle)
+        + 0.000719 * np.cos(2 * angle)
+        + 0.000077 * np.sin(2 * angle)
+    )
 
 
 def _gendaylit_air_mass(zenith_deg: np.ndarray) -> np.ndarray:
@@ -823,8 +907,9 @@ def _day_of_year(value: Any) -> np.ndarray:
 
 
 def _efficacy_bin(epsilon: np.ndarray) -> np.ndarray:
-    return np.searchsorted(_PEREZ_BIN_EDGES, np.where(np.isnan(epsilon), 1.0, epsilon),
-                           side="right")
+    return np.searchsorted(
+        _PEREZ_BIN_EDGES, np.where(np.isnan(epsilon), 1.0, epsilon), side="right"
+    )
 
 
 def _perez_illuminances(zenith_deg, dni, dhi, day, precipitable_water):
@@ -835,8 +920,9 @@ def _perez_illuminances(zenith_deg, dni, dhi, day, precipitable_water):
     a, b, c, d = _DIFFUSE_EFFICACY[:, k]
     diffuse_efficacy = a + b * precipitable_water + c * np.cos(z) + d * np.log(delta)
     a, b, c, d = _DIRECT_EFFICACY[:, k]
-    direct_efficacy = np.maximum(a + b * precipitable_water + c * np.exp(5.73 * z - 5.0)
-                                 + d * delta, 0.0)
+    direct_efficacy = np.maximum(
+        a + b * precipitable_water + c * np.exp(5.73 * z - 5.0) + d * delta, 0.0
+    )
     diffuse = np.maximum(dhi * diffuse_efficacy, 0.0)
     direct = np.maximum(dni * direct_efficacy, 0.0)
     return epsilon, delta, z_deg, diffuse, direct
@@ -888,8 +974,9 @@ def _gendaylit_grid_integral(co: PerezCoefficients, zenith_rad: np.ndarray) -> n
     cosg = np.cos(z) * np.cos(theta) + np.sin(z) * np.sin(theta) * np.cos(phi)
     gamma = np.arccos(np.clip(cosg, -1.0, 1.0))  # theta_phi_to_dzeta_gamma()
     a, b, c, d, e = (v[..., None] for v in co)
-    lum = ((1.0 + a * np.exp(b / np.cos(theta)))
-           * (1.0 + c * np.exp(d * gamma) + e * np.cos(gamma) ** 2))
+    lum = (1.0 + a * np.exp(b / np.cos(theta))) * (
+        1.0 + c * np.exp(d * gamma) + e * np.cos(gamma) ** 2
+    )
     lum = lum.astype(np.float32).astype(float)  # gendaylit stores lv_mod as float
     return np.sum(lum * np.cos(theta), axis=-1) * (2.0 * np.pi / 145.0)
 
@@ -946,14 +1033,18 @@ def gendaylit_parameters(
     Where gendaylit writes its all-zero "error sky" the results are zero
     (documented zeros, not exceptions): sun at or below the horizon, both
     irradiances 0, a positive coefficient b, or a direct illuminance above
-    127500 lx. NaN inputs propagate.
+    127500 lx. NaN inputs propagate. For a sun below the horizon this follows
+    gendaylit's date mode (error sky); with ``-ang`` gendaylit instead writes a
+    glowing sky and a sun computed with the zenith angle limited to 90 deg.
     """
     sun_dir = _unit_vectors(sun_direction, "sun_direction")
     dni = _nonnegative(direct_normal_irradiance, "direct_normal_irradiance")
     too_bright = dni > SOLAR_CONSTANT
     if np.any(too_bright):
-        raise ValueError(f"direct_normal_irradiance must not exceed the solar constant "
-                         f"{SOLAR_CONSTANT} W m-2, got {dni[too_bright].ravel()[0]!r}")
+        raise ValueError(
+            f"direct_normal_irradiance must not exceed the solar constant "
+            f"{SOLAR_CONSTANT} W m-2, got {dni[too_bright].ravel()[0]!r}"
+        )
     dhi = _nonnegative(diffuse_horizontal_irradiance, "diffuse_horizontal_irradiance")
     day = _day_of_year(day_of_year)
     rho = _nonnegative(ground_reflectance, "ground_reflectance")
@@ -964,7 +1055,8 @@ def gendaylit_parameters(
     altitude, sun_dir = _clamp_sun(sun_dir, True)
     zenith = 90.0 - np.rad2deg(altitude)
     epsilon, delta, z_deg, diffuse, direct = _perez_illuminances(
-        zenith, dni, dhi, day, float(precipitable_water))
+        zenith, dni, dhi, day, float(precipitable_water)
+    )
     zenith_rad = np.deg2rad(z_deg)
     co = perez_coefficients(epsilon, delta, z_deg)
 
@@ -973,15 +1065,18 @@ def gendaylit_parameters(
     solar = direct / sun_solid_angle(2 * _GENDAYLIT_HALF_SUN_ANGLE) / WHITE_EFFICACY
 
     # Ground: zenith radiance x gensky's normfactor for the matching sky.
-    zenith_lum = _perez_relative(np.array([0.0, 0.0, 1.0]),
-                                 np.stack([np.sin(zenith_rad), np.zeros_like(zenith_rad),
-                                           np.cos(zenith_rad)], axis=-1), co)
+    zenith_lum = _perez_relative(
+        np.array([0.0, 0.0, 1.0]),
+        np.stack([np.sin(zenith_rad), np.zeros_like(zenith_rad), np.cos(zenith_rad)], axis=-1),
+        co,
+    )
     sun_z = np.sin(altitude)
     with np.errstate(invalid="ignore", divide="ignore"):
         normfactor = np.select(
             [epsilon == 1.0, epsilon >= 6.0],
             [0.777778, _normsc(altitude, _NORMSC_CLEAR) / _f2_clear(altitude, sun_z) / np.pi],
-            _normsc(altitude, _NORMSC_INTERMEDIATE) / _f2_intermediate(altitude) / np.pi)
+            _normsc(altitude, _NORMSC_INTERMEDIATE) / _f2_intermediate(altitude) / np.pi,
+        )
     ground = zenith_lum * normalisation * normfactor
     if sun:
         ground = np.where(epsilon > 1.0, ground + 6.8e-5 / np.pi * solar * sun_z, ground)
@@ -990,8 +1085,12 @@ def gendaylit_parameters(
     ground = ground * rho
     solar = np.where(epsilon > 1.0, solar, 0.0)
 
-    error_sky = ((sun_dir[..., 2] <= 0.0) | ((dni == 0) & (dhi == 0))
-                 | (co.b > 0.0) | (direct > _SOLAR_CONSTANT_LUX))
+    error_sky = (
+        (sun_dir[..., 2] <= 0.0)
+        | ((dni == 0) & (dhi == 0))
+        | (co.b > 0.0)
+        | (direct > _SOLAR_CONSTANT_LUX)
+    )
     zero = np.zeros(shape)
     return GendaylitParameters(
         sun_direction=np.array(sun_dir, dtype=float),
@@ -1119,16 +1218,23 @@ def _sun_frames(sun_direction: Any) -> np.ndarray:
 
 
 def _gensky_builder(kind: str) -> Callable[..., DaylightSky]:
-    def build(sun_direction: Any, *, turbidity: float = 2.45, ground_reflectance: float = 0.2,
-              sun: bool = True) -> DaylightSky:
+    def build(
+        sun_direction: Any,
+        *,
+        turbidity: float = 2.45,
+        ground_reflectance: float = 0.2,
+        sun: bool = True,
+    ) -> DaylightSky:
         s = _sun_frames(sun_direction)
         p = gensky_parameters(s, kind, turbidity=turbidity, ground_reflectance=ground_reflectance)
         solar = p.solar_radiance if sun else np.zeros_like(p.solar_radiance)
-        return DaylightSky(f"gensky-{kind}", p.sun_direction, solar, gensky_sun_solid_angle,
-                           p.ground_radiance, p)
+        return DaylightSky(
+            f"gensky-{kind}", p.sun_direction, solar, gensky_sun_solid_angle, p.ground_radiance, p
+        )
 
-    build.__doc__ = (f"gensky {kind} sky; options turbidity, ground_reflectance, sun "
-                     "(False as gensky -s/-i).")
+    build.__doc__ = (
+        f"gensky {kind} sky; options turbidity, ground_reflectance, sun (False as gensky -s/-i)."
+    )
     return build
 
 
@@ -1142,17 +1248,20 @@ def _clear_sky_irradiance(sun: np.ndarray, day: np.ndarray, linke_turbidity: flo
     up = zenith < 90.0
     if np.any(up):
         air_mass = pvlib.atmosphere.get_absolute_airmass(
-            pvlib.atmosphere.get_relative_airmass(zenith[up], model="kastenyoung1989"))
-        clear = pvlib.clearsky.ineichen(zenith[up], air_mass, linke_turbidity,
-                                        dni_extra=SOLAR_CONSTANT * _eccentricity(
-                                            np.broadcast_to(day, zenith.shape)[up]))
+            pvlib.atmosphere.get_relative_airmass(zenith[up], model="kastenyoung1989")
+        )
+        clear = pvlib.clearsky.ineichen(
+            zenith[up],
+            air_mass,
+            linke_turbidity,
+            dni_extra=SOLAR_CONSTANT * _eccentricity(np.broadcast_to(day, zenith.shape)[up]),
+        )
         dni[up] = np.minimum(np.asarray(clear["dni"], dtype=float), SOLAR_CONSTANT)
         dhi[up] = np.asarray(clear["dhi"], dtype=float)
     return dni, dhi
 
 
-def _irradiances(s, day, direct_normal_irradiance, diffuse_horizontal_irradiance,
-                 linke_turbidity):
+def _irradiances(s, day, direct_normal_irradiance, diffuse_horizontal_irradiance, linke_turbidity):
     dni, dhi = direct_normal_irradiance, diffuse_horizontal_irradiance
     if dni is None or dhi is None:
         clear_dni, clear_dhi = _clear_sky_irradiance(s, day, linke_turbidity)
@@ -1161,38 +1270,71 @@ def _irradiances(s, day, direct_normal_irradiance, diffuse_horizontal_irradiance
     return dni, dhi
 
 
-def _perez_builder(sun_direction: Any, *, direct_normal_irradiance: Any = None,
-                   diffuse_horizontal_irradiance: Any = None, day_of_year: Any = 0,
-                   ground_reflectance: float = 0.2, precipitable_water: float = 2.0,
-                   linke_turbidity: float = 3.0, sun: bool = True) -> DaylightSky:
+def _perez_builder(
+    sun_direction: Any,
+    *,
+    direct_normal_irradiance: Any = None,
+    diffuse_horizontal_irradiance: Any = None,
+    day_of_year: Any = 0,
+    ground_reflectance: float = 0.2,
+    precipitable_water: float = 2.0,
+    linke_turbidity: float = 3.0,
+    sun: bool = True,
+) -> DaylightSky:
     """Perez 1993 sky as gendaylit -W; irradiances default to Ineichen clear sky."""
     s = _sun_frames(sun_direction)
     day = _day_of_year(day_of_year)
-    dni, dhi = _irradiances(s, day, direct_normal_irradiance, diffuse_horizontal_irradiance,
-                            linke_turbidity)
-    p = gendaylit_parameters(s, dni, dhi, day_of_year=day, ground_reflectance=ground_reflectance,
-                             precipitable_water=precipitable_water, sun=sun)
-    return DaylightSky("perez", p.sun_direction, p.solar_radiance,
-                       sun_solid_angle(2 * _GENDAYLIT_HALF_SUN_ANGLE), p.ground_radiance, p)
+    dni, dhi = _irradiances(
+        s, day, direct_normal_irradiance, diffuse_horizontal_irradiance, linke_turbidity
+    )
+    p = gendaylit_parameters(
+        s,
+        dni,
+        dhi,
+        day_of_year=day,
+        ground_reflectance=ground_reflectance,
+        precipitable_water=precipitable_water,
+        sun=sun,
+    )
+    return DaylightSky(
+        "perez",
+        p.sun_direction,
+        p.solar_radiance,
+        sun_solid_angle(2 * _GENDAYLIT_HALF_SUN_ANGLE),
+        p.ground_radiance,
+        p,
+    )
 
 
 def _cie_builder(sky_type: int) -> Callable[..., DaylightSky]:
-    def build(sun_direction: Any, *, direct_normal_irradiance: Any = None,
-              diffuse_horizontal_irradiance: Any = None, day_of_year: Any = 0,
-              ground_reflectance: float = 0.2, precipitable_water: float = 2.0,
-              linke_turbidity: float = 3.0, sun: bool | None = None) -> DaylightSky:
+    def build(
+        sun_direction: Any,
+        *,
+        direct_normal_irradiance: Any = None,
+        diffuse_horizontal_irradiance: Any = None,
+        day_of_year: Any = 0,
+        ground_reflectance: float = 0.2,
+        precipitable_water: float = 2.0,
+        linke_turbidity: float = 3.0,
+        sun: bool | None = None,
+    ) -> DaylightSky:
         s = _sun_frames(sun_direction)
         day = _day_of_year(day_of_year)
         show_sun = sky_type >= 6 if sun is None else bool(sun)
-        dni, dhi = _irradiances(s, day, direct_normal_irradiance,
-                                diffuse_horizontal_irradiance, linke_turbidity)
+        dni, dhi = _irradiances(
+            s, day, direct_normal_irradiance, diffuse_horizontal_irradiance, linke_turbidity
+        )
         dni = _nonnegative(dni, "direct_normal_irradiance")
         dhi = _nonnegative(dhi, "diffuse_horizontal_irradiance")
         rho = _nonnegative(ground_reflectance, "ground_reflectance")
         zenith = np.rad2deg(np.arccos(np.clip(s[..., 2], -1.0, 1.0)))
         _, _, _, diffuse, direct = _perez_illuminances(
-            zenith, np.broadcast_to(dni, zenith.shape), np.broadcast_to(dhi, zenith.shape),
-            day, float(precipitable_water))
+            zenith,
+            np.broadcast_to(dni, zenith.shape),
+            np.broadcast_to(dhi, zenith.shape),
+            day,
+            float(precipitable_water),
+        )
         up = s[..., 2] > 0.0
         omega = sun_solid_angle()
         # Radiance units: illuminance / 179.
@@ -1203,8 +1345,9 @@ def _cie_builder(sky_type: int) -> Callable[..., DaylightSky]:
         integral = np.sum(shape * (weights * directions[:, 2])[:, None], axis=0)
         zenith_radiance = sky_irradiance / integral
         ground = rho / np.pi * (sky_irradiance + beam * np.maximum(s[..., 2], 0.0))
-        return DaylightSky(f"cie-{sky_type}", s, beam / omega, omega, ground,
-                           _CieSky(sky_type, zenith_radiance))
+        return DaylightSky(
+            f"cie-{sky_type}", s, beam / omega, omega, ground, _CieSky(sky_type, zenith_radiance)
+        )
 
     build.__doc__ = f"CIE standard general sky type {sky_type}: {CIE_SKY_TYPES[sky_type][2]}."
     return build
@@ -1223,8 +1366,7 @@ _CIE_N_THETA = 64
 _CIE_N_PHI = 128
 
 _REGISTRY: dict[str, Callable[..., DaylightSky]] = {
-    **{f"gensky-{k}": _gensky_builder(k)
-       for k in ("clear", "intermediate", "overcast", "uniform")},
+    **{f"gensky-{k}": _gensky_builder(k) for k in ("clear", "intermediate", "overcast", "uniform")},
     **{f"cie-{t}": _cie_builder(t) for t in range(1, 16)},
     "perez": _perez_builder,
     "point-sun": _point_sun,
@@ -1286,8 +1428,9 @@ def daylight(model: str, sun_direction: Any, **options: Any) -> DaylightSky:
     try:
         builder = _REGISTRY[model]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown sky model {model!r}; valid models: "
-                         f"{', '.join(_REGISTRY)}") from None
+        raise ValueError(
+            f"unknown sky model {model!r}; valid models: {', '.join(_REGISTRY)}"
+        ) from None
     return builder(sun_direction, **options)
 
 
@@ -1309,8 +1452,9 @@ def _hemisphere_quadrature(n_theta: int, n_phi: int) -> tuple[np.ndarray, np.nda
     return directions.reshape(-1, 3), weights.reshape(-1).copy()
 
 
-def horizontal_irradiance(sky: DaylightSky, n_theta: int = 64, n_phi: int = 128,
-                          include_sun: bool = True) -> np.ndarray:
+def horizontal_irradiance(
+    sky: DaylightSky, n_theta: int = 64, n_phi: int = 128, include_sun: bool = True
+) -> np.ndarray:
     """Irradiance on a horizontal plane from the sky above the horizon and the sun.
 
     ``E = sum_k w_k L(d_k) cos(theta_k) + Ls omega_s max(sun_z, 0)``, with
@@ -1337,5 +1481,6 @@ def horizontal_irradiance(sky: DaylightSky, n_theta: int = 64, n_phi: int = 128,
     total = np.sum(radiance * (weights * directions[:, 2])[:, None], axis=0)
     if include_sun:
         total = total + sky.solar_radiance * sky.sun_solid_angle * np.maximum(
-            sky.sun_direction[..., 2], 0.0)
+            sky.sun_direction[..., 2], 0.0
+        )
     return total

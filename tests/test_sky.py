@@ -44,16 +44,26 @@ PRINTED_ATOL = 1e-6
 
 def _radiance(*args: str, stdin: str | None = None) -> str:
     env = dict(os.environ, RAYPATH=f".{os.pathsep}{RADIANCE_LIB}")
-    result = subprocess.run([str(RADIANCE_BIN / args[0]), *args[1:]], input=stdin,
-                            capture_output=True, text=True, check=True, env=env)
+    result = subprocess.run(
+        [str(RADIANCE_BIN / args[0]), *args[1:]],
+        input=stdin,
+        capture_output=True,
+        text=True,
+        check=True,
+        env=env,
+    )
     return result.stdout
 
 
 def _parse_sky(text: str) -> dict:
     """Solar radiance, sun direction and skyfunc arguments of a gensky/gendaylit file."""
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
-    parsed = {"solar": None, "sun": None, "args": None, "comments": [
-        ln for ln in text.splitlines() if ln.startswith("#")]}
+    parsed = {
+        "solar": None,
+        "sun": None,
+        "args": None,
+        "comments": [ln for ln in text.splitlines() if ln.startswith("#")],
+    }
     for i, line in enumerate(lines):
         if line.startswith("void light solar"):
             parsed["solar"] = float(lines[i + 3].split()[1])
@@ -67,15 +77,18 @@ def _parse_sky(text: str) -> dict:
 def _gensky_direction(altitude_deg, azimuth_deg):
     """gensky.c/gendaylit.c: azimuth from south, positive toward west."""
     alt, az = np.deg2rad(altitude_deg), np.deg2rad(azimuth_deg)
-    return np.stack([-np.sin(az) * np.cos(alt), -np.cos(az) * np.cos(alt),
-                     np.sin(alt) * np.ones_like(az)], axis=-1)
+    return np.stack(
+        [-np.sin(az) * np.cos(alt), -np.cos(az) * np.cos(alt), np.sin(alt) * np.ones_like(az)],
+        axis=-1,
+    )
 
 
 def _direction(zenith_deg, azimuth_deg):
     """Unit vector from zenith angle and azimuth clockwise from north."""
     z, a = np.deg2rad(zenith_deg), np.deg2rad(azimuth_deg)
-    return np.stack([np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z) * np.ones_like(a)],
-                    axis=-1)
+    return np.stack(
+        [np.sin(z) * np.sin(a), np.sin(z) * np.cos(a), np.cos(z) * np.ones_like(a)], axis=-1
+    )
 
 
 def _test_directions(rng, n=300):
@@ -94,7 +107,9 @@ def _test_directions(rng, n=300):
 def _rtrace_sky(sky_text: str, directions: np.ndarray, tmp_path: Path) -> np.ndarray:
     """Radiance of the sky glow seen along each direction, by rtrace -ab 0."""
     scene = tmp_path / "sky.rad"
-    scene.write_text(sky_text + """
+    scene.write_text(
+        sky_text
+        + """
 skyfunc glow skyglow
 0
 0
@@ -109,11 +124,17 @@ skyglow source grounddome
 0
 0
 4 0 0 -1 180
-""")
+"""
+    )
     octree = tmp_path / "sky.oct"
-    octree.write_bytes(subprocess.run(
-        [str(RADIANCE_BIN / "oconv"), str(scene)], capture_output=True, check=True,
-        env=dict(os.environ, RAYPATH=f".{os.pathsep}{RADIANCE_LIB}")).stdout)
+    octree.write_bytes(
+        subprocess.run(
+            [str(RADIANCE_BIN / "oconv"), str(scene)],
+            capture_output=True,
+            check=True,
+            env=dict(os.environ, RAYPATH=f".{os.pathsep}{RADIANCE_LIB}"),
+        ).stdout
+    )
     rays = "".join(f"0 0 0 {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in directions)
     out = _radiance("rtrace", "-h", "-ab", "0", "-w", str(octree), stdin=rays)
     values = np.array([ln.split() for ln in out.splitlines() if ln.strip()], dtype=float)
@@ -128,7 +149,8 @@ def test_sun_solid_angle_values():
     # disc and 6e-5 sr gensky's (for its ground term; it writes a 0.5 deg disc).
     assert sky.sun_solid_angle(0.533) == pytest.approx(6.8e-5, rel=1e-2)
     assert sky.gensky_sun_solid_angle == pytest.approx(
-        2 * np.pi * (1 - np.cos(np.deg2rad(0.25))), rel=1e-12)
+        2 * np.pi * (1 - np.cos(np.deg2rad(0.25))), rel=1e-12
+    )
     assert sky.gensky_sun_solid_angle == pytest.approx(5.98e-5, rel=1e-3)
     # small-disc limit pi (d/2)^2
     assert sky.sun_solid_angle(0.01) == pytest.approx(np.pi * np.deg2rad(0.005) ** 2, rel=1e-8)
@@ -153,8 +175,14 @@ def test_sun_disc_mask_and_broadcasting():
 
 # --- gensky -----------------------------------------------------------------
 
-GENSKY_FLAGS = {"+s": "clear", "-s": "clear", "+i": "intermediate", "-i": "intermediate",
-                "-c": "overcast", "-u": "uniform"}
+GENSKY_FLAGS = {
+    "+s": "clear",
+    "-s": "clear",
+    "+i": "intermediate",
+    "-i": "intermediate",
+    "-c": "overcast",
+    "-u": "uniform",
+}
 
 
 def _compare_gensky(params, parsed, flag):
@@ -197,8 +225,9 @@ def test_gensky_parameters_match_gensky_ang(flag):
 @needs_radiance
 def test_gensky_parameters_match_gensky_dates():
     """gensky MONTH DAY HOUR -a 40 -o 0 -m 0 -y 1996: the sun from gensky's own file."""
-    for (month, day), hour in itertools.product([(3, 21), (6, 21), (12, 21)],
-                                                [4.0, 5.5, 8.0, 12.0, 16.25, 19.5, 21.0]):
+    for (month, day), hour in itertools.product(
+        [(3, 21), (6, 21), (12, 21)], [4.0, 5.5, 8.0, 12.0, 16.25, 19.5, 21.0]
+    ):
         base = [str(month), str(day), str(hour), "-a", "40", "-o", "0", "-m", "0", "-y", "1996"]
         clear = _parse_sky(_radiance("gensky", *base, "+s"))
         sun = clear["args"][4:7]  # written with %f
@@ -213,12 +242,13 @@ def test_gensky_parameters_match_gensky_dates():
 def test_gensky_parameters_user_zenith_and_solar():
     """gensky -b (zenith radiance) and -r (solar radiance), incl. -r 0 (no sun)."""
     sun = _gensky_direction(40.0, 20.0)
-    for extra, kwargs in [(["+s", "-b", "12.5"], {"zenith_radiance": 12.5}),
-                          (["+s", "-r", "5e6"], {"solar_radiance": 5e6}),
-                          (["+i", "-b", "3", "-r", "2e6"], {"zenith_radiance": 3.0,
-                                                            "solar_radiance": 2e6}),
-                          (["+s", "-r", "0"], {"solar_radiance": 0.0}),
-                          (["-c", "-b", "20"], {"zenith_radiance": 20.0})]:
+    for extra, kwargs in [
+        (["+s", "-b", "12.5"], {"zenith_radiance": 12.5}),
+        (["+s", "-r", "5e6"], {"solar_radiance": 5e6}),
+        (["+i", "-b", "3", "-r", "2e6"], {"zenith_radiance": 3.0, "solar_radiance": 2e6}),
+        (["+s", "-r", "0"], {"solar_radiance": 0.0}),
+        (["-c", "-b", "20"], {"zenith_radiance": 20.0}),
+    ]:
         kind = GENSKY_FLAGS[extra[0]]
         parsed = _parse_sky(_radiance("gensky", "-ang", "40", "20", *extra))
         _compare_gensky(sky.gensky_parameters(sun, kind, **kwargs), parsed, extra[0])
@@ -228,19 +258,29 @@ def _params_from_gensky_args(args):
     kind = {1: "clear", 2: "overcast", 3: "uniform", 4: "intermediate"}[int(args[0])]
     sun = args[4:7] if len(args) == 7 else np.array([0.0, 0.0, 1.0])
     return sky.GenskyParameters(
-        sky_type=np.array(kind), zenith_radiance=np.array(args[1]),
+        sky_type=np.array(kind),
+        zenith_radiance=np.array(args[1]),
         ground_radiance=np.array(args[2]),
         normalisation=np.array(args[3] if len(args) == 7 else np.nan),
-        solar_radiance=np.array(0.0), sun_direction=sun)  # as written: Radiance uses it so
+        solar_radiance=np.array(0.0),
+        sun_direction=sun,
+    )  # as written: Radiance uses it so
 
 
 @pytest.mark.radiance
 @needs_radiance
-@pytest.mark.parametrize("gensky_args", [
-    ("-ang", "30", "40", "-s"), ("-ang", "3", "-100", "-s", "-t", "5"),
-    ("-ang", "60", "170", "-i"), ("-ang", "-3", "10", "-i"), ("-ang", "88", "0", "-s"),
-    ("-ang", "20", "0", "-c"), ("-ang", "20", "0", "-u", "-g", "0.5"),
-])
+@pytest.mark.parametrize(
+    "gensky_args",
+    [
+        ("-ang", "30", "40", "-s"),
+        ("-ang", "3", "-100", "-s", "-t", "5"),
+        ("-ang", "60", "170", "-i"),
+        ("-ang", "-3", "10", "-i"),
+        ("-ang", "88", "0", "-s"),
+        ("-ang", "20", "0", "-c"),
+        ("-ang", "20", "0", "-u", "-g", "0.5"),
+    ],
+)
 def test_skybright_matches_rtrace(gensky_args, tmp_path):
     """skybright vs Radiance evaluating skybright.cal itself (rtrace -ab 0 on the glow)."""
     text = _radiance("gensky", *gensky_args)
@@ -248,8 +288,7 @@ def test_skybright_matches_rtrace(gensky_args, tmp_path):
     directions = _test_directions(np.random.default_rng(20260610))
     expected = _rtrace_sky(text, directions, tmp_path)
     # rtrace prints 7 significant digits and keeps colours as float32.
-    np.testing.assert_allclose(sky.skybright(directions, params), expected, rtol=2e-6,
-                               atol=1e-9)
+    np.testing.assert_allclose(sky.skybright(directions, params), expected, rtol=2e-6, atol=1e-9)
 
 
 def test_gensky_reference_numbers():
@@ -266,8 +305,9 @@ def test_gensky_reference_numbers():
 def test_gensky_parameters_broadcasting():
     sun = _gensky_direction(np.array([[10.0], [50.0]]), np.array([0.0, 90.0, 180.0]))
     assert sun.shape == (2, 3, 3)
-    p = sky.gensky_parameters(sun, np.array(["clear", "intermediate", "overcast"]),
-                              turbidity=np.array([[2.0], [4.0]]))
+    p = sky.gensky_parameters(
+        sun, np.array(["clear", "intermediate", "overcast"]), turbidity=np.array([[2.0], [4.0]])
+    )
     for name in ("zenith_radiance", "ground_radiance", "normalisation", "solar_radiance"):
         assert getattr(p, name).shape == (2, 3)
     assert p.sun_direction.shape == (2, 3, 3)
@@ -286,7 +326,8 @@ def test_gensky_parameters_edges():
     # 87 deg limit for clear/intermediate only
     top = np.array([0.0, 0.0, 1.0])
     assert sky.gensky_parameters(top, "clear").sun_direction[2] == pytest.approx(
-        np.sin(np.deg2rad(87.0)))
+        np.sin(np.deg2rad(87.0))
+    )
     assert sky.gensky_parameters(top, "overcast").sun_direction[2] == 1.0
     nan = sky.gensky_parameters([np.nan, np.nan, np.nan], "clear")
     assert np.isnan(nan.zenith_radiance) and np.isnan(nan.solar_radiance)
@@ -299,22 +340,34 @@ def test_gensky_parameters_edges():
 
 
 def test_skybright_broadcasting_and_edges():
-    p = sky.gensky_parameters(_gensky_direction(np.array([10.0, 40.0, 70.0]), 30.0),
-                              ["clear", "intermediate", "overcast"])
+    p = sky.gensky_parameters(
+        _gensky_direction(np.array([10.0, 40.0, 70.0]), 30.0), ["clear", "intermediate", "overcast"]
+    )
     d = _test_directions(np.random.default_rng(1), n=20)
     out = sky.skybright(d[:, None, :], p)
     assert out.shape == (len(d), 3)
     for t in range(3):
-        pt = sky.GenskyParameters(*(np.asarray(getattr(p, f))[t] for f in (
-            "sky_type", "zenith_radiance", "ground_radiance", "normalisation",
-            "solar_radiance", "sun_direction")))
+        pt = sky.GenskyParameters(
+            *(
+                np.asarray(getattr(p, f))[t]
+                for f in (
+                    "sky_type",
+                    "zenith_radiance",
+                    "ground_radiance",
+                    "normalisation",
+                    "solar_radiance",
+                    "sun_direction",
+                )
+            )
+        )
         np.testing.assert_allclose(out[:, t], sky.skybright(d, pt), rtol=1e-14)
     # at the nadir the ground dominates: (0.01)^-10 vs (0.01)^10
     nadir = sky.skybright([0.0, 0.0, -1.0], p)
     np.testing.assert_allclose(nadir, p.ground_radiance, rtol=1e-12)
     # continuous across the horizon guard Dz = 0.01 (clear sky factor -> 1)
-    just = sky.skybright(_direction(np.rad2deg(np.arccos([0.0100001, 0.0099999])), 0.0)
-                         [:, None, :], p)
+    just = sky.skybright(
+        _direction(np.rad2deg(np.arccos([0.0100001, 0.0099999])), 0.0)[:, None, :], p
+    )
     np.testing.assert_allclose(just[0], just[1], rtol=1e-5)
     assert np.all(np.isnan(sky.skybright([np.nan, np.nan, np.nan], p)))
     with pytest.raises(TypeError):
@@ -332,12 +385,17 @@ def test_gensky_normalisation_figures():
     """
     alts = np.array([2.0, 5.0, 10.0, 20.0, 30.0, 45.0, 60.0, 75.0])
     s = _gensky_direction(alts, 30.0)
-    for kind, tol in [("clear", 0.015), ("intermediate", 0.02), ("overcast", 0.002),
-                      ("uniform", 0.004)]:
+    for kind, tol in [
+        ("clear", 0.015),
+        ("intermediate", 0.02),
+        ("overcast", 0.002),
+        ("uniform", 0.004),
+    ]:
         d = sky.daylight(f"gensky-{kind}", s)
         p = d.parameters
-        normfactor = (p.ground_radiance / 0.2
-                      - 6e-5 / np.pi * p.solar_radiance * p.sun_direction[:, 2]) / p.zenith_radiance
+        normfactor = (
+            p.ground_radiance / 0.2 - 6e-5 / np.pi * p.solar_radiance * p.sun_direction[:, 2]
+        ) / p.zenith_radiance
         e = sky.horizontal_irradiance(d, include_sun=False)
         np.testing.assert_allclose(e, np.pi * normfactor * p.zenith_radiance, rtol=tol)
     # the formulas alone: (1 + 2 cos)/3 integrates to 7 pi / 9 (gensky's 0.777778)
@@ -402,8 +460,11 @@ def test_cie_type12_is_cie_clear_sky():
     # apart from the ground blend (weight (Dz + 1.01)^-20 < 1e-4 for Dz > 0.6).
     p = sky.gensky_parameters(sun, "clear")
     hi = d[:, 2] > 0.6
-    np.testing.assert_allclose(sky.skybright(d[hi], p) / sky.skybright([0, 0, 1.0], p),
-                               sky.cie_general(d[hi], sun, 12), rtol=1e-3)
+    np.testing.assert_allclose(
+        sky.skybright(d[hi], p) / sky.skybright([0, 0, 1.0], p),
+        sky.cie_general(d[hi], sun, 12),
+        rtol=1e-3,
+    )
 
 
 def test_cie_general_symmetric_about_solar_meridian():
@@ -415,8 +476,9 @@ def test_cie_general_symmetric_about_solar_meridian():
     mirrored = d - 2 * (d @ normal)[:, None] * normal
     sun = 0.6 * axis + np.array([0, 0, 0.8])
     for t in range(1, 16):
-        np.testing.assert_allclose(sky.cie_general(mirrored, sun, t),
-                                   sky.cie_general(d, sun, t), rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(
+            sky.cie_general(mirrored, sun, t), sky.cie_general(d, sun, t), rtol=1e-10, atol=1e-14
+        )
 
 
 def test_cie_general_broadcasting_and_edges():
@@ -440,9 +502,14 @@ def test_cie_general_broadcasting_and_edges():
 # gendaylit -ang 45 30 -W 700 150 (pyradiance's Radiance): epsilon 4.1021,
 # delta 0.1497; skyfunc 10 4.200e+01 2.290e+01 -0.987797 -0.310477 13.033068
 # -3.460981 0.236428 -0.353553 -0.612372 0.707107; solar 5.741e+06.
-GENDAYLIT_45_30 = {"epsilon": 4.1021, "delta": 0.1497, "A1": 42.00, "A2": 22.90,
-                   "coefficients": [-0.987797, -0.310477, 13.033068, -3.460981, 0.236428],
-                   "solar": 5.741e6}
+GENDAYLIT_45_30 = {
+    "epsilon": 4.1021,
+    "delta": 0.1497,
+    "A1": 42.00,
+    "A2": 22.90,
+    "coefficients": [-0.987797, -0.310477, 13.033068, -3.460981, 0.236428],
+    "solar": 5.741e6,
+}
 
 
 def test_gendaylit_reference_numbers():
@@ -495,14 +562,17 @@ def test_perez_coefficients_bins_and_edges():
     z = np.deg2rad(30.0)
     co1 = sky.perez_coefficients(1.0, 0.3, 30.0)
     assert co1.c == pytest.approx(np.exp((0.3 * (2.8 + 0.6004 * z)) ** 1.2375) - 1.0, rel=1e-6)
-    assert co1.d == pytest.approx(-np.exp(0.3 * (1.8734 + 0.6297 * z)) + 0.9738 + 0.3 * 0.2809,
-                                  rel=1e-6)
+    assert co1.d == pytest.approx(
+        -np.exp(0.3 * (1.8734 + 0.6297 * z)) + 0.9738 + 0.3 * 0.2809, rel=1e-6
+    )
     # Delta raised to 0.2 in 1.065 < epsilon < 2.8
-    np.testing.assert_allclose(sky.perez_coefficients(2.0, 0.05, 30.0),
-                               sky.perez_coefficients(2.0, 0.2, 30.0))
+    np.testing.assert_allclose(
+        sky.perez_coefficients(2.0, 0.05, 30.0), sky.perez_coefficients(2.0, 0.2, 30.0)
+    )
     # broadcasting
-    co = sky.perez_coefficients(np.array([1.0, 1.1, 3.0, 8.0])[:, None], 0.2,
-                                np.array([10.0, 50.0]))
+    co = sky.perez_coefficients(
+        np.array([1.0, 1.1, 3.0, 8.0])[:, None], 0.2, np.array([10.0, 50.0])
+    )
     assert co.a.shape == (4, 2)
     assert np.isnan(sky.perez_coefficients(np.nan, 0.2, 10.0).a)
     for bad in (0.99, 12.01):
@@ -516,26 +586,44 @@ def test_perez_1993_formula_guard_and_broadcasting():
     co = sky.perez_coefficients(eps, delta, 40.0)
     d = _direction(np.array([0.0, 30.0, 60.0, 89.0]), np.array([0.0, 90.0, 180.0, 270.0]))
     gamma = np.arccos(np.clip(d @ sun, -1, 1))
-    expected = ((1 + co.a * np.exp(co.b / d[:, 2]))
-                * (1 + co.c * np.exp(co.d * gamma) + co.e * np.cos(gamma) ** 2))
+    expected = (1 + co.a * np.exp(co.b / d[:, 2])) * (
+        1 + co.c * np.exp(co.d * gamma) + co.e * np.cos(gamma) ** 2
+    )
     np.testing.assert_allclose(sky.perez_1993(d, sun, eps, delta), expected, rtol=1e-12)
     # horizon guard: cos(zeta) -> 0.01 at and below Dz = 0.01
     low = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], _direction(95.0, 30.0)])
     g = np.arccos(np.clip(low @ sun, -1, 1))
-    guarded = ((1 + co.a * np.exp(co.b / 0.01))
-               * (1 + co.c * np.exp(co.d * g) + co.e * np.cos(g) ** 2))
+    guarded = (1 + co.a * np.exp(co.b / 0.01)) * (
+        1 + co.c * np.exp(co.d * g) + co.e * np.cos(g) ** 2
+    )
     np.testing.assert_allclose(sky.perez_1993(low, sun, eps, delta), guarded, rtol=1e-12)
-    out = sky.perez_1993(d[:, None, :], _direction(np.array([20.0, 60.0]), 0.0),
-                         np.array([1.0, 6.5]), 0.2)
+    out = sky.perez_1993(
+        d[:, None, :], _direction(np.array([20.0, 60.0]), 0.0), np.array([1.0, 6.5]), 0.2
+    )
     assert out.shape == (4, 2)
     assert np.isnan(sky.perez_1993([np.nan] * 3, sun, eps, delta))
 
 
 def _gendaylit_cases():
-    return list(itertools.product(
-        [2.0, 8.0, 20.0, 35.0, 50.0, 65.0, 80.0, 88.0], [-100.0, 30.0],
-        [(700, 150), (900, 40), (400, 250), (100, 300), (0, 200), (20, 120), (300, 100),
-         (1000, 60), (5, 50), (600, 400), (0, 50)]))
+    return list(
+        itertools.product(
+            [2.0, 8.0, 20.0, 35.0, 50.0, 65.0, 80.0, 88.0],
+            [-100.0, 30.0],
+            [
+                (700, 150),
+                (900, 40),
+                (400, 250),
+                (100, 300),
+                (0, 200),
+                (20, 120),
+                (300, 100),
+                (1000, 60),
+                (5, 50),
+                (600, 400),
+                (0, 50),
+            ],
+        )
+    )
 
 
 def _compare_gendaylit(p, parsed, coefficient_atol=PRINTED_ATOL):
@@ -566,8 +654,9 @@ def test_gendaylit_parameters_match_gendaylit_ang():
     """
     error_skies = 0
     for alt, az, (dni, dhi) in _gendaylit_cases():
-        parsed = _parse_sky(_radiance("gendaylit", "-ang", str(alt), str(az), "-W", str(dni),
-                                      str(dhi)))
+        parsed = _parse_sky(
+            _radiance("gendaylit", "-ang", str(alt), str(az), "-W", str(dni), str(dhi))
+        )
         p = sky.gendaylit_parameters(_gensky_direction(alt, az), dni, dhi, day_of_year=0)
         _compare_gendaylit(p, parsed)
         error_skies += parsed["args"][0] == 0.0
@@ -580,17 +669,41 @@ def test_gendaylit_parameters_match_gendaylit_dates():
     """gendaylit MONTH DAY HOUR (decimal hours) -a 40 -o 0 -m 0 -y 1996 -W, -g, -s."""
     days = {(3, 21): 80, (6, 21): 172, (12, 21): 355}
     for ((month, day), doy), hour, (dni, dhi), extra in itertools.product(
-            days.items(), [6.5, 9.25, 12.0, 15.75], [(750, 110), (200, 260), (0, 180)],
-            [(), ("-g", "0.4"), ("-s",)]):
-        out = _radiance("gendaylit", str(month), str(day), str(hour), "-a", "40", "-o", "0",
-                        "-m", "0", "-y", "1996", "-W", str(dni), str(dhi), *extra)
+        days.items(),
+        [6.5, 9.25, 12.0, 15.75],
+        [(750, 110), (200, 260), (0, 180)],
+        [(), ("-g", "0.4"), ("-s",)],
+    ):
+        out = _radiance(
+            "gendaylit",
+            str(month),
+            str(day),
+            str(hour),
+            "-a",
+            "40",
+            "-o",
+            "0",
+            "-m",
+            "0",
+            "-y",
+            "1996",
+            "-W",
+            str(dni),
+            str(dhi),
+            *extra,
+        )
         parsed = _parse_sky(out)
         sun = parsed["args"][7:10]
         if sun[2] <= 0:
             continue
-        p = sky.gendaylit_parameters(sun / np.linalg.norm(sun), dni, dhi, day_of_year=doy,
-                                     ground_reflectance=0.4 if "-g" in extra else 0.2,
-                                     sun="-s" not in extra)
+        p = sky.gendaylit_parameters(
+            sun / np.linalg.norm(sun),
+            dni,
+            dhi,
+            day_of_year=doy,
+            ground_reflectance=0.4 if "-g" in extra else 0.2,
+            sun="-s" not in extra,
+        )
         # the sun comes from gendaylit's 6-decimal print: its zenith angle is
         # known to ~1e-6 rad, and c varies by up to ~30 per radian
         _compare_gendaylit(p, parsed, coefficient_atol=5e-5)
@@ -599,36 +712,55 @@ def test_gendaylit_parameters_match_gendaylit_dates():
 @pytest.mark.radiance
 @needs_radiance
 def test_gendaylit_below_horizon_is_error_sky():
-    out = _radiance("gendaylit", "12", "21", "4.5", "-a", "40", "-o", "0", "-m", "0",
-                    "-W", "0", "0")
+    out = _radiance(
+        "gendaylit", "12", "21", "4.5", "-a", "40", "-o", "0", "-m", "0", "-W", "0", "0"
+    )
     parsed = _parse_sky(out)
     assert np.all(parsed["args"][:7] == 0.0)
     sun = parsed["args"][7:10]
     p = sky.gendaylit_parameters(sun / np.linalg.norm(sun), 0.0, 0.0, day_of_year=355)
     assert p.diffuse_normalisation == 0.0 and p.solar_radiance == 0.0
+    # Documented difference: with -ang and the sun below the horizon gendaylit
+    # still writes a sky and a sun (its zenith angle limited to 90 deg); we
+    # follow its date mode and give zeros.
+    parsed = _parse_sky(_radiance("gendaylit", "-ang", "-3", "0", "-W", "100", "50"))
+    assert parsed["args"][0] > 0 and parsed["solar"] > 0
+    p = sky.gendaylit_parameters(_gensky_direction(-3.0, 0.0), 100.0, 50.0)
+    assert p.diffuse_normalisation == 0.0 and p.solar_radiance == 0.0
 
 
 @pytest.mark.radiance
 @needs_radiance
-@pytest.mark.parametrize("cmd", [("-ang", "35", "20", "-W", "700", "150"),
-                                 ("-ang", "10", "-60", "-W", "50", "300"),
-                                 ("-ang", "70", "150", "-W", "850", "90", "-g", "0.3")])
+@pytest.mark.parametrize(
+    "cmd",
+    [
+        ("-ang", "35", "20", "-W", "700", "150"),
+        ("-ang", "10", "-60", "-W", "50", "300"),
+        ("-ang", "70", "150", "-W", "850", "90", "-g", "0.3"),
+    ],
+)
 def test_perez_sky_matches_rtrace(cmd, tmp_path):
     """DaylightSky('perez').radiance vs Radiance evaluating perezlum.cal (rtrace)."""
     text = _radiance("gendaylit", *cmd, "-s")
     args = _parse_sky(text)["args"]
     zero = np.array(0.0)
     p = sky.GendaylitParameters(
-        sun_direction=args[7:10], epsilon=zero, delta=zero,
+        sun_direction=args[7:10],
+        epsilon=zero,
+        delta=zero,
         coefficients=sky.PerezCoefficients(*(np.array(v) for v in args[2:7])),
-        diffuse_normalisation=np.array(args[0]), ground_radiance=np.array(args[1]),
-        solar_radiance=zero, diffuse_illuminance=zero, direct_illuminance=zero)
-    holder = sky.DaylightSky("perez", p.sun_direction[None], np.zeros(1), 6.8e-5,
-                             np.array([args[1]]), p)
+        diffuse_normalisation=np.array(args[0]),
+        ground_radiance=np.array(args[1]),
+        solar_radiance=zero,
+        diffuse_illuminance=zero,
+        direct_illuminance=zero,
+    )
+    holder = sky.DaylightSky(
+        "perez", p.sun_direction[None], np.zeros(1), 6.8e-5, np.array([args[1]]), p
+    )
     directions = _test_directions(np.random.default_rng(11))
     expected = _rtrace_sky(text, directions, tmp_path)
-    np.testing.assert_allclose(holder.radiance(directions)[:, 0], expected, rtol=2e-6,
-                               atol=1e-9)
+    np.testing.assert_allclose(holder.radiance(directions)[:, 0], expected, rtol=2e-6, atol=1e-9)
 
 
 def test_gendaylit_parameters_edges_and_broadcasting():
@@ -656,14 +788,22 @@ def test_gendaylit_parameters_edges_and_broadcasting():
 
 
 def _frames():
-    return _gensky_direction(np.array([-4.0, 0.0, 6.0, 25.0, 50.0, 75.0]),
-                             np.array([-90.0, -60.0, -30.0, 0.0, 30.0, 60.0]))
+    return _gensky_direction(
+        np.array([-4.0, 0.0, 6.0, 25.0, 50.0, 75.0]),
+        np.array([-90.0, -60.0, -30.0, 0.0, 30.0, 60.0]),
+    )
 
 
 def test_registry_and_unknown_name():
     names = sky.sky_models()
-    assert {"gensky-clear", "gensky-intermediate", "gensky-overcast", "gensky-uniform",
-            "perez", "point-sun"} <= set(names)
+    assert {
+        "gensky-clear",
+        "gensky-intermediate",
+        "gensky-overcast",
+        "gensky-uniform",
+        "perez",
+        "point-sun",
+    } <= set(names)
     assert {f"cie-{t}" for t in range(1, 16)} <= set(names)
     with pytest.raises(ValueError, match="gensky-clear.*point-sun|point-sun.*gensky-clear"):
         sky.daylight("cie-16", _frames())
@@ -703,8 +843,9 @@ def test_daylight_gensky_is_skybright():
     assert d.sun_solid_angle == sky.gensky_sun_solid_angle
     no_sun = sky.daylight("gensky-clear", s, sun=False)  # gensky -s
     np.testing.assert_array_equal(no_sun.solar_radiance, 0.0)
-    np.testing.assert_allclose(no_sun.ground_radiance,
-                               sky.daylight("gensky-clear", s).ground_radiance)
+    np.testing.assert_allclose(
+        no_sun.ground_radiance, sky.daylight("gensky-clear", s).ground_radiance
+    )
 
 
 def test_point_sun():
@@ -712,8 +853,9 @@ def test_point_sun():
     d = sky.daylight("point-sun", s)
     np.testing.assert_array_equal(d.radiance(_test_directions(np.random.default_rng(0), 5)), 0)
     # unit normal irradiance: horizontal irradiance = sin(altitude), 0 below the horizon
-    np.testing.assert_allclose(sky.horizontal_irradiance(d), np.maximum(s[:, 2], 0.0),
-                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        sky.horizontal_irradiance(d), np.maximum(s[:, 2], 0.0), rtol=1e-12, atol=1e-15
+    )
 
 
 @pytest.mark.parametrize("sky_type", [1, 5, 8, 12, 15])
@@ -721,17 +863,21 @@ def test_cie_daylight_normalisation(sky_type):
     """The CIE sky integrates to the diffuse illuminance / 179, sun to the beam."""
     s = _frames()[2:]
     dni, dhi = np.array([600.0, 700.0, 800.0, 850.0]), np.array([150.0, 120.0, 100.0, 90.0])
-    d = sky.daylight(f"cie-{sky_type}", s, direct_normal_irradiance=dni,
-                     diffuse_horizontal_irradiance=dhi, day_of_year=172, sun=True)
+    d = sky.daylight(
+        f"cie-{sky_type}",
+        s,
+        direct_normal_irradiance=dni,
+        diffuse_horizontal_irradiance=dhi,
+        day_of_year=172,
+        sun=True,
+    )
     g = sky.gendaylit_parameters(s, dni, dhi, day_of_year=172)
     ok = g.diffuse_illuminance > 0  # (not gendaylit's error skies)
     # a finer grid than the 64 x 128 used to normalise
     e_sky = sky.horizontal_irradiance(d, n_theta=150, n_phi=300, include_sun=False)
-    np.testing.assert_allclose(e_sky[ok], g.diffuse_illuminance[ok] / sky.WHITE_EFFICACY,
-                               rtol=1e-4)
+    np.testing.assert_allclose(e_sky[ok], g.diffuse_illuminance[ok] / sky.WHITE_EFFICACY, rtol=1e-4)
     beam = d.solar_radiance * d.sun_solid_angle
-    np.testing.assert_allclose(beam[ok], g.direct_illuminance[ok] / sky.WHITE_EFFICACY,
-                               rtol=1e-12)
+    np.testing.assert_allclose(beam[ok], g.direct_illuminance[ok] / sky.WHITE_EFFICACY, rtol=1e-12)
     # the ground: rho / pi x (sky + sun) horizontal irradiance
     e_all = e_sky + beam * s[:, 2]
     np.testing.assert_allclose(d.ground_radiance[ok], 0.2 / np.pi * e_all[ok], rtol=1e-4)
@@ -758,8 +904,9 @@ def test_perez_daylight_horizontal_irradiance_figure():
     """
     s = _frames()[2:]
     for dni, dhi in [(800.0, 100.0), (400.0, 250.0), (0.0, 300.0)]:
-        d = sky.daylight("perez", s, direct_normal_irradiance=dni,
-                         diffuse_horizontal_irradiance=dhi)
+        d = sky.daylight(
+            "perez", s, direct_normal_irradiance=dni, diffuse_horizontal_irradiance=dhi
+        )
         g = d.parameters
         ok = g.diffuse_illuminance > 0
         e = sky.horizontal_irradiance(d, include_sun=False)
