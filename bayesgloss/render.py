@@ -305,8 +305,8 @@ def glossy_basis(
     lobe: str = "phong",
     ground: str = "plane",
     ground_reflectance: float = 0.2,
-    n_u: int = 12,
-    n_beta: int = 16,
+    n_u: int = 8,
+    n_beta: int = 12,
     chunk: int = 32,
 ) -> np.ndarray:
     """G_f(t; n): radiance of white glossy facets for each exponent.
@@ -324,8 +324,9 @@ def glossy_basis(
     ground, ground_reflectance
         See :func:`incident_radiance`.
     n_u, n_beta : int
-        Lobe quadrature: Gauss-Legendre nodes in u = cos^(n+1)(alpha) and
-        equal steps in azimuth about the mirror direction.
+        Lobe quadrature: Gauss-Legendre nodes in u = cos^(n+1)(alpha) on
+        each of two panels, and Gauss-Legendre nodes in azimuth about the
+        mirror direction over the arc above the facet.
     chunk : int
         Facets per vectorised block (bounds memory).
 
@@ -343,13 +344,29 @@ def glossy_basis(
     normal = geometry.normal
     mirror = geometry.mirror_direction
     t1, t2 = _orthonormal_frame(mirror)
+    # the facet normal in the lobe frame: n = c m + b (cos b0 t1 + sin b0 t2)
+    c_mn = np.clip(np.einsum("fk,fk->f", mirror, normal), -1.0, 1.0)
+    b_mn = np.sqrt(1.0 - c_mn**2)
+    beta0 = np.arctan2(np.einsum("fk,fk->f", t2, normal), np.einsum("fk,fk->f", t1, normal))
 
-    u, wu = np.polynomial.legendre.leggauss(n_u)
-    u, wu = 0.5 * (u + 1.0), 0.5 * wu  # nodes and weights on [0, 1]
-    beta = (np.arange(n_beta) + 0.5) * (2 * np.pi / n_beta)
-    cos_a = u[None, :] ** (1.0 / (n[:, None] + 1.0))  # (N, U)
+    # Lobe rings of polar angle alpha < alpha* = asin(m.n) lie wholly above the
+    # facet; wider rings are cut by its tangent plane. Two Gauss-Legendre
+    # panels in u split there, and on each ring the azimuth nodes cover only the
+    # arc above the facet, so the cut never falls between nodes.
+    x, wx = np.polynomial.legendre.leggauss(n_u)
+    x, wx = 0.5 * (x + 1.0), 0.5 * wx  # [0, 1]
+    y, wy = np.polynomial.legendre.leggauss(n_beta)  # [-1, 1], weights sum to 2
+    n_col = n[None, :, None]
+    u_star = np.cos(np.arcsin(np.clip(c_mn, 0.0, 1.0)))[:, None, None] ** (n_col + 1.0)  # (F,N,1)
+    u = np.concatenate([u_star * x, u_star + (1.0 - u_star) * x], axis=-1)  # (F, N, 2U)
+    w_u = np.concatenate([u_star * wx, (1.0 - u_star) * wx], axis=-1)
+    cos_a = u ** (1.0 / (n_col + 1.0))
     sin_a = np.sqrt(np.maximum(1.0 - cos_a**2, 0.0))
-    weight = wu / n_beta  # per node: du dbeta / (2 pi)
+    # arc of the ring above the facet: c cos(a) + b sin(a) cos(beta - beta0) > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = -c_mn[:, None, None] * cos_a / (b_mn[:, None, None] * sin_a)
+    half = np.arccos(np.clip(np.nan_to_num(ratio, nan=-1.0, posinf=1.0, neginf=-1.0), -1, 1))
+    weight = w_u * half / np.pi  # (F, N, 2U); per node also wy / 2
 
     l_ground = None
     if ground == "plane":
@@ -360,23 +377,21 @@ def glossy_basis(
     out = np.empty((len(normal), len(n), len(sun)))
     for lo in range(0, len(normal), chunk):
         sl = slice(lo, lo + chunk)
-        # node directions (C, N, U, B, 3)
-        ring = (
-            np.cos(beta)[:, None] * t1[sl, None, :] + np.sin(beta)[:, None] * t2[sl, None, :]
-        )  # (C, B, 3)
+        beta = beta0[sl, None, None, None] + half[sl, :, :, None] * y  # (C, N, 2U, B)
         dirs = (
-            cos_a[None, :, :, None, None] * mirror[sl, None, None, None, :]
-            + sin_a[None, :, :, None, None] * ring[:, None, None, :, :]
-        )
-        cos_i = np.einsum("cnubk,ck->cnub", dirs, normal[sl])
+            cos_a[sl, :, :, None, None] * mirror[sl, None, None, None, :]
+            + (sin_a[sl, :, :, None] * np.cos(beta))[..., None] * t1[sl, None, None, None, :]
+            + (sin_a[sl, :, :, None] * np.sin(beta))[..., None] * t2[sl, None, None, None, :]
+        )  # (C, N, 2U, B, 3)
         if lobe == "phong":
-            h = (cos_i > 0).astype(float)
+            h = np.broadcast_to(wy / 2, dirs.shape[:-1])
         else:
-            h = np.maximum(cos_i, 0.0) * ((n + 2.0) / (n + 1.0))[None, :, None, None]
-        radiance = sky.radiance(dirs)  # (C, N, U, B, T)
+            cos_i = np.maximum(np.einsum("cnubk,ck->cnub", dirs, normal[sl]), 0.0)
+            h = cos_i * ((n + 2.0) / (n + 1.0))[None, :, None, None] * (wy / 2)
+        radiance = sky.radiance(dirs)  # (C, N, 2U, B, T)
         if l_ground is not None:
             radiance = np.where(dirs[..., 2:3] < 0, l_ground, radiance)
-        out[sl] = np.einsum("cnub,cnubt,u->cnt", h, radiance, weight)
+        out[sl] = np.einsum("cnub,cnubt,cnu->cnt", h, radiance, weight[sl])
 
         # sun disc: lobe averaged over the disc times the disc's irradiance
         cos_s = np.clip(mirror[sl] @ sun.T, -1.0, 1.0)  # (C, T)

@@ -78,7 +78,10 @@ def test_glossy_head_on_uniform_sky_is_one(uniform_sky, lobe):
     g = _geometry([[0, 0, 1], [0.6, 0, 0.8]], [[0, 0, 1], [0.6, 0, 0.8]])
     sky = uniform_sky(levels=[1.0])
     gl = render.glossy_basis(g, sky, [1.0, 10.0, 300.0, 1e4], lobe=lobe, ground="sky")
-    np.testing.assert_allclose(gl[..., 0], 1.0, rtol=1e-6)
+    # phong: the integrand is constant in the lobe coordinates (exact); lafortune:
+    # cos(theta_i) = u^(1/(n+1)) is not polynomial in u, and 12 Gauss-Legendre
+    # nodes integrate it to ~2e-4
+    np.testing.assert_allclose(gl[..., 0], 1.0, rtol=1e-9 if lobe == "phong" else 5e-4)
 
 
 @pytest.mark.parametrize("lobe", ["phong", "lafortune"])
@@ -105,9 +108,12 @@ def test_glossy_lobe_quadrature_matches_brute_force(smooth_sky, lobe, exponent):
 
 
 def test_glossy_default_nodes_converged(smooth_sky):
-    # the default lobe quadrature (12 x 16 nodes) agrees with a 4x denser one
+    # the default lobe quadrature agrees with a much denser one, for facets seen at
+    # least 6 degrees off grazing (edge-on facets cover no pixels anyway)
     rng = np.random.default_rng(4)
-    g = _geometry(np.abs(_random_units(rng, 8)) * [1, 1, 1], _random_units(rng, 8) + [0, 0, 2])
+    g = _geometry(np.abs(_random_units(rng, 40)), _random_units(rng, 40) + [0, 0, 1])
+    seen = g.cos_view > 0.1
+    g = ViewGeometry(g.normal[seen], g.view_direction[seen])
     exps = [1.0, 5.0, 50.0, 5000.0]
     coarse = render.glossy_basis(g, smooth_sky, exps, ground="sky")
     fine = render.glossy_basis(g, smooth_sky, exps, ground="sky", n_u=48, n_beta=64)
@@ -165,3 +171,65 @@ def test_bad_arguments(uniform_sky):
         render.glossy_basis(g, sky, [-3.0])
     with pytest.raises(ValueError, match="1.5"):
         render.ground_plane_radiance(sky, 1.5)
+
+
+# --------------------------------------------------------------------------
+# Against the real Radiance (rtrace from pyradiance)
+# --------------------------------------------------------------------------
+
+
+def _radiance_day(kind, spec, sky_type, facet_index, view="W"):
+    """rtrace and the forward model for a few paper facets over the paper's day.
+
+    Both see the same sun (gensky -ang is given bayesgloss's SPA direction) and
+    the same sky and ground glow (no ground plane: ground="sky" in the model).
+    """
+    from bayesgloss import radiance, scene
+
+    seq = scene.paper_sequence(view=view, sky_model=f"gensky-{sky_type}")
+    # facets that face the camera (on the closed object the others are hidden)
+    facing = seq.geometry.cos_view > 0.05
+    facets = seq.facets.subset(np.intersect1d(facet_index, np.flatnonzero(facing)))
+    geom = render.view_geometry(facets, seq.camera_position)
+    colour = scene.PAPER["colour"]
+    mat = radiance.material("mat", kind, colour, spec, 0.0)
+    obj = mat + radiance.polygons(facets.polygons, "mat")
+    rays_dir = facets.center - seq.camera_position
+    rays_dir /= np.linalg.norm(rays_dir, axis=1, keepdims=True)
+    ref = np.empty((len(facets), len(seq.times)))
+    for t, s in enumerate(seq.sky.sun_direction):
+        sky_text = radiance.gensky_ang(s, sky_type) + radiance.sky_glow(ground=True)
+        rgb = radiance.rtrace_scene(sky_text + obj, np.tile(seq.camera_position, (len(facets), 1)),
+                                    rays_dir)
+        ref[:, t] = rgb[:, 1]  # grey material: R = G = B
+    model = render.radiance_material_prediction(geom, seq.sky, kind, colour, spec, ground="sky")
+    return seq, ref, model
+
+
+# facets of the paper hemisphere at several tilts and bearings (ring * 16 + segment)
+_FACETS = list(range(0, 96, 5))
+
+
+@pytest.mark.radiance
+@pytest.mark.parametrize("sky_type", ["clear", "intermediate"])
+def test_matte_facets_agree_with_rtrace(sky_type):
+    seq, ref, model = _radiance_day("plastic", 0.0, sky_type, _FACETS)
+    sun_up = seq.sky.sun_direction[:, 2] > 0.02
+    rel = np.abs(model[:, sun_up] / ref[:, sun_up] - 1)
+    # issue #2: within 3 % for matte facets with the sun up; rtrace's own
+    # Monte Carlo error with -ad 4096 -as 2048 is a few tenths of a percent
+    assert rel.max() < 0.03, f"max relative difference {rel.max():.4f}"
+
+
+@pytest.mark.radiance
+@pytest.mark.parametrize("sky_type", ["clear", "intermediate"])
+@pytest.mark.parametrize("kind", ["plastic", "metal"])
+def test_glossy_facets_peak_like_rtrace(sky_type, kind):
+    seq, ref, model = _radiance_day(kind, 1.0, sky_type, _FACETS)
+    lit = ref.max(axis=1) > 0.05 * ref.max()
+    # issue #2: the glossy curves' peak frame and height within 10 %
+    np.testing.assert_array_equal(np.argmax(model[lit], 1), np.argmax(ref[lit], 1))
+    np.testing.assert_allclose(model[lit].max(1), ref[lit].max(1), rtol=0.10)
+    # and the whole curve, sun up, to a few percent: a mirror ray has no sampling noise
+    sun_up = seq.sky.sun_direction[:, 2] > 0.02
+    np.testing.assert_allclose(model[:, sun_up], ref[:, sun_up], rtol=0.03, atol=1e-3)
