@@ -32,19 +32,21 @@ def _demo(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     seq = scenes.paper_sequence(view=args.view, sky_model="gensky-clear")
     geom, sky = seq.geometry, seq.sky
-    curves = {
-        spec: scenes.plastic_radiance(seq, specularity=spec) for spec in (0.0, 0.5, 1.0)
-    }
+    curves = {spec: scenes.plastic_radiance(seq, specularity=spec) for spec in (0.0, 0.5, 1.0)}
     hours = seq.solar_hours
     # the facet facing the camera most squarely, among those the sun reaches
     facing = np.argmax(geom.cos_view)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     ax = axes[0]
     for spec, curve in curves.items():
-        ax.plot(hours, curve[facing] * 179, marker="o", ms=3,
-                label=f"plastic, specularity {spec:g}")
-    ax.set(xlabel="local solar time [h]", ylabel="luminance toward camera [cd m$^{-2}$]",
-           title=f"Facet {seq.facets.ids[facing]}, {args.view} view, gensky clear + sun")
+        ax.plot(
+            hours, curve[facing] * 179, marker="o", ms=3, label=f"plastic, specularity {spec:g}"
+        )
+    ax.set(
+        xlabel="local solar time [h]",
+        ylabel="luminance toward camera [cd m$^{-2}$]",
+        title=f"Facet {seq.facets.ids[facing]}, {args.view} view, gensky clear + sun",
+    )
     ax.legend()
     ax = axes[1]
     from .render import paper_point_sun
@@ -52,8 +54,11 @@ def _demo(args: argparse.Namespace) -> int:
     for gloss in (0.0, 0.5, 1.0):
         pred = paper_point_sun(geom, sky.sun_direction, gloss, 20.0)[facing]
         ax.plot(hours, pred / max(pred.max(), 1e-12), marker="o", ms=3, label=f"gamma {gloss:g}")
-    ax.set(xlabel="local solar time [h]", ylabel="relative radiance",
-           title="Paper's point-sun prediction (eqs. 2, 4-6, n = 20)")
+    ax.set(
+        xlabel="local solar time [h]",
+        ylabel="relative radiance",
+        title="Paper's point-sun prediction (eqs. 2, 4-6, n = 20)",
+    )
     ax.legend()
     path = out / "forward_model.png"
     fig.savefig(path, dpi=120)

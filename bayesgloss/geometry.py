@@ -120,7 +120,9 @@ def tessellated_hemisphere(
     return Facets(ids, np.array(normals), np.array(centers), polygons)
 
 
-def camera_position(bearing: float | str, distance: float = 10.0, height: float = 2.0) -> np.ndarray:
+def camera_position(
+    bearing: float | str, distance: float = 10.0, height: float = 2.0
+) -> np.ndarray:
     """World position of a camera standing at a bearing from the origin.
 
     Parameters

@@ -32,8 +32,21 @@ __all__ = [
 
 #: rtrace options for sky-lit facets: one ambient bounce reaches the sky glow,
 #: no irradiance caching, dense stratified hemisphere sampling.
-RTRACE_ACCURATE = ("-ab", "1", "-aa", "0", "-ad", "4096", "-as", "2048", "-lr", "6", "-lw",
-                   "1e-5", "-u-")
+RTRACE_ACCURATE = (
+    "-ab",
+    "1",
+    "-aa",
+    "0",
+    "-ad",
+    "4096",
+    "-as",
+    "2048",
+    "-lr",
+    "6",
+    "-lw",
+    "1e-5",
+    "-u-",
+)
 
 
 def _pyradiance_dir() -> Path:
@@ -104,8 +117,15 @@ def gensky_ang(
     }
     if sky_type not in flag:
         raise ValueError(f"unknown gensky sky {sky_type!r}; valid: {', '.join(flag)}")
-    args = ["gensky", "-ang", f"{altitude:.6f}", f"{azimuth_gensky:.6f}", flag[sky_type],
-            "-g", ground_reflectance]
+    args = [
+        "gensky",
+        "-ang",
+        f"{altitude:.6f}",
+        f"{azimuth_gensky:.6f}",
+        flag[sky_type],
+        "-g",
+        ground_reflectance,
+    ]
     if turbidity is not None:
         args += ["-t", turbidity]
     return run(args).decode()
@@ -124,8 +144,10 @@ def material(name: str, kind: str, colour, specularity: float, roughness: float)
     if kind not in ("plastic", "metal"):
         raise ValueError(f"unknown material kind {kind!r}; valid: plastic, metal")
     rgb = np.broadcast_to(np.asarray(colour, dtype=float), (3,))
-    return (f"void {kind} {name}\n0\n0\n5 {rgb[0]:.6g} {rgb[1]:.6g} {rgb[2]:.6g} "
-            f"{specularity:.6g} {roughness:.6g}\n")
+    return (
+        f"void {kind} {name}\n0\n0\n5 {rgb[0]:.6g} {rgb[1]:.6g} {rgb[2]:.6g} "
+        f"{specularity:.6g} {roughness:.6g}\n"
+    )
 
 
 def polygons(polys, modifiers, prefix: str = "facet") -> str:

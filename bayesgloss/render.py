@@ -58,6 +58,7 @@ Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,13 +126,15 @@ def view_geometry(facets: Facets, camera_position) -> ViewGeometry:
     return ViewGeometry(normal, view_directions(facets.center, camera_position))
 
 
-def sphere_quadrature(resolution: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=8)
+def sphere_quadrature(resolution: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
     """Ring grid over the whole sphere with the horizon on a ring boundary.
 
     Rings of equal polar width; each ring is cut into cells of about equal
     width in azimuth (staggered from ring to ring); each cell is represented
-    by its centre and weighted by its exact solid angle, so the weights sum
-    to 4 pi exactly.
+    by the point at its mean height and centre azimuth and weighted by its
+    exact solid angle, so the weights sum to 4 pi and integrals of functions
+    linear in z (e.g. horizontal irradiance of a uniform sky) are exact.
 
     Parameters
     ----------
@@ -145,6 +148,10 @@ def sphere_quadrature(resolution: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         Cell centres, unit vectors.
     solid_angle : ndarray (K,)
         Cell solid angles [sr].
+
+    Notes
+    -----
+    Results are cached and read-only.
     """
     if not 0.05 <= resolution <= 30:
         raise ValueError(f"resolution must be within [0.05, 30] deg, got {resolution}")
@@ -153,13 +160,16 @@ def sphere_quadrature(resolution: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     dirs, weights = [], []
     for i in range(n_rings):
         t0, t1 = theta_edges[i], theta_edges[i + 1]
-        tm = 0.5 * (t0 + t1)
-        n_phi = max(4, round(2 * np.pi * np.sin(tm) / (t1 - t0)))
+        zc = 0.5 * (np.cos(t0) + np.cos(t1))  # mean height of the ring: exact for linear z
+        st = np.sqrt(1.0 - zc**2)
+        n_phi = max(4, round(2 * np.pi * st / (t1 - t0)))
         phi = (np.arange(n_phi) + 0.5 * (1 + i % 2)) * (2 * np.pi / n_phi)
-        st = np.sin(tm)
-        dirs.append(np.stack([st * np.cos(phi), st * np.sin(phi), np.full(n_phi, np.cos(tm))], -1))
+        dirs.append(np.stack([st * np.cos(phi), st * np.sin(phi), np.full(n_phi, zc)], -1))
         weights.append(np.full(n_phi, (np.cos(t0) - np.cos(t1)) * 2 * np.pi / n_phi))
-    return np.concatenate(dirs), np.concatenate(weights)
+    dirs, weights = np.concatenate(dirs), np.concatenate(weights)
+    dirs.flags.writeable = False  # cached: shared by every caller
+    weights.flags.writeable = False
+    return dirs, weights
 
 
 def _check_ground(ground: str) -> None:
@@ -192,7 +202,7 @@ def incident_radiance(
     quadrature : tuple, optional
         ``(directions, solid_angle)`` used to integrate the horizontal
         irradiance that lights the ground plane; default
-        ``sphere_quadrature(1.0)``.
+        ``sphere_quadrature()``.
 
     Returns
     -------
@@ -216,7 +226,7 @@ def ground_plane_radiance(sky, ground_reflectance: float = 0.2, quadrature=None)
     """
     if not 0 <= ground_reflectance <= 1:
         raise ValueError(f"ground_reflectance must be within [0, 1], got {ground_reflectance}")
-    dirs, omega = quadrature if quadrature is not None else sphere_quadrature(1.0)
+    dirs, omega = quadrature if quadrature is not None else sphere_quadrature()
     up = dirs[:, 2] > 0
     sky_h = (dirs[up, 2] * omega[up]) @ sky.radiance(dirs[up])
     sun, e_sun = _sun_terms(sky)
@@ -230,7 +240,7 @@ def diffuse_components(
     *,
     ground: str = "plane",
     ground_reflectance: float = 0.2,
-    resolution: float = 1.0,
+    resolution: float = 3.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Radiance of white Lambertian facets, split into sky-and-ground and sun.
 
@@ -465,7 +475,7 @@ def facet_bases(
     lobe: str = "phong",
     ground: str = "plane",
     ground_reflectance: float = 0.2,
-    resolution: float = 1.0,
+    resolution: float = 3.0,
 ) -> FacetBases:
     """Diffuse and glossy bases for a sequence: the forward model's one quadrature."""
     exps = np.sort(np.atleast_1d(np.asarray(exponents, dtype=float)))
@@ -485,7 +495,7 @@ def radiance_material_prediction(
     *,
     ground: str = "plane",
     ground_reflectance: float = 0.2,
-    resolution: float = 1.0,
+    resolution: float = 3.0,
 ) -> np.ndarray:
     """Radiance toward the camera of facets made of a Radiance material, (F, T).
 
@@ -513,10 +523,12 @@ def radiance_material_prediction(
         kind, colour, specularity, roughness, geometry.cos_view[:, None], cos_incident
     )
     common = dict(ground=ground, ground_reflectance=ground_reflectance)
-    sky_part, sun_part = diffuse_components(geometry, sky, resolution=resolution, **common)
-    out = mat.diffuse_ambient * sky_part + mat.diffuse_direct * sun_part
+    out = np.zeros((len(geometry), len(sun)))
+    if np.any(np.asarray(mat.diffuse_ambient) > 0):  # a pure mirror needs no quadrature
+        sky_part, sun_part = diffuse_components(geometry, sky, resolution=resolution, **common)
+        out += mat.diffuse_ambient * sky_part + mat.diffuse_direct * sun_part
     if np.any(np.asarray(mat.specular) > 0):
-        out = out + mat.specular * mirror_radiance(geometry, sky, **common)
+        out += mat.specular * mirror_radiance(geometry, sky, **common)
     return out
 
 

@@ -78,13 +78,22 @@ def paper_sequence(view: str = "W", sky_model: str = "gensky-clear", **overrides
     sun_dir = sun.sun_direction_at(times, cfg["latitude"], cfg["longitude"], refraction=False)
     day = sky.daylight(sky_model, sun_dir, ground_reflectance=cfg["ground_reflectance"])
     return Sequence(
-        facets, cam, render.view_geometry(facets, cam), times,
-        np.asarray(cfg["solar_hours"], float), day,
+        facets,
+        cam,
+        render.view_geometry(facets, cam),
+        times,
+        np.asarray(cfg["solar_hours"], float),
+        day,
     )
 
 
-def plastic_radiance(seq: Sequence, specularity: float, colour: float = PAPER["colour"],
-                     kind: str = "plastic", **kwargs) -> np.ndarray:
+def plastic_radiance(
+    seq: Sequence,
+    specularity: float,
+    colour: float = PAPER["colour"],
+    kind: str = "plastic",
+    **kwargs,
+) -> np.ndarray:
     """Radiance toward the camera of the sequence's facets made of a Radiance
     material of roughness 0, (F, T) [W sr^-1 m^-2]."""
     return render.radiance_material_prediction(

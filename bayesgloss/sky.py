@@ -391,9 +391,11 @@ def gensky_parameters(
 
 def _ground_blend(dz: np.ndarray, sky: np.ndarray, ground: np.ndarray) -> np.ndarray:
     """skybright.cal/perezlum.cal: wmean((Dz+1.01)^10, sky, (Dz+1.01)^-10, ground)."""
-    w_sky = (dz + 1.01) ** 10
-    w_ground = (dz + 1.01) ** -10
-    return (w_sky * sky + w_ground * ground) / (w_sky + w_ground)
+    w = (dz + 1.01) ** 20  # the ratio of the two weights
+    out = sky * w
+    out += ground
+    out /= w + 1.0
+    return out
 
 
 def skybright(directions: Any, params: GenskyParameters) -> np.ndarray:
@@ -440,26 +442,47 @@ def skybright(directions: Any, params: GenskyParameters) -> np.ndarray:
     code = params.code
     a2, a3, a4 = params.zenith_radiance, params.ground_radiance, params.normalisation
 
-    cosgamma = dx * sx + dy * sy + dz * sz
-    gamma = np.arccos(np.clip(cosgamma, -1.0, 1.0))  # skybright.cal uses Acos (bounded)
-    zt = np.arccos(np.clip(sz, -1.0, 1.0))
-    eta = np.arccos(np.clip(dz, -1.0, 1.0))
+    cosgamma = np.clip(dx * sx + dy * sy + dz * sz, -1.0, 1.0)
+    gamma = np.arccos(cosgamma)  # skybright.cal uses Acos (bounded)
 
-    above = dz - _HORIZON_GUARD > 0.0
-    gradation = np.where(above, 1.0 - np.exp(-0.32 / np.where(above, dz, 1.0)), 1.0)
-    sunny = a2 * (0.91 + 10.0 * np.exp(-3.0 * gamma) + 0.45 * cosgamma * cosgamma) * gradation / a4
-    cloudy = a2 * (1.0 + 2.0 * dz) / 3.0
-    uniform = a2 * np.ones_like(dz)
-    inter = (
-        a2
-        * ((1.35 * np.sin(5.631 - 3.59 * eta) + 3.12) * np.sin(4.396 - 2.6 * zt) + 6.37 - eta)
-        / 2.326
-        * np.exp(gamma * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812))
-        / a4
-    )
-    sky = np.select(
-        [code == 1, code == 2, code == 3, code == 4], [sunny, cloudy, uniform, inter], np.nan
-    )
+    def sunny():
+        above = dz - _HORIZON_GUARD > 0.0
+        gradation = np.where(above, 1.0 - np.exp(-0.32 / np.where(above, dz, 1.0)), 1.0)
+        # A2 (0.91 + 10 exp(-3 g) + 0.45 cos^2 g) gradation / A4, in place
+        out = np.exp(-3.0 * gamma)
+        out *= 10.0
+        out += 0.91
+        out += 0.45 * cosgamma * cosgamma
+        out *= gradation
+        out *= a2 / a4
+        return out
+
+    def cloudy():
+        return a2 * (1.0 + 2.0 * dz) / 3.0
+
+    def uniform():
+        return a2 * np.ones_like(dz)
+
+    def inter():
+        zt = np.arccos(np.clip(sz, -1.0, 1.0))
+        eta = np.arccos(np.clip(dz, -1.0, 1.0))
+        return (
+            a2
+            * ((1.35 * np.sin(5.631 - 3.59 * eta) + 3.12) * np.sin(4.396 - 2.6 * zt) + 6.37 - eta)
+            / 2.326
+            * np.exp(gamma * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812))
+            / a4
+        )
+
+    # evaluate only the sky types present (usually one for a whole sequence)
+    branches = {1: sunny, 2: cloudy, 3: uniform, 4: inter}
+    present = [int(c) for c in np.unique(code) if int(c) in branches]
+    if len(present) == 1 and np.all(code == present[0]):
+        sky = branches[present[0]]()
+    else:
+        sky = np.full(np.broadcast_shapes(dz.shape, np.shape(code)), np.nan)
+        for c in present:
+            sky = np.where(code == c, branches[c](), sky)
     return _ground_blend(dz, sky, a3)
 
 

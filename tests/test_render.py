@@ -94,8 +94,9 @@ def test_glossy_lobe_quadrature_matches_brute_force(smooth_sky, lobe, exponent):
     views = normals + 0.7 * _random_units(rng, 6)
     views /= np.linalg.norm(views, axis=1, keepdims=True)
     g = _geometry(normals, views)
-    got = render.glossy_basis(g, smooth_sky, [exponent], lobe=lobe, ground="sky", n_u=24,
-                              n_beta=48)[:, 0, :]
+    got = render.glossy_basis(
+        g, smooth_sky, [exponent], lobe=lobe, ground="sky", n_u=24, n_beta=48
+    )[:, 0, :]
     dirs, w = render.sphere_quadrature(0.25)
     cos_i = normals @ dirs.T
     cos_a = np.maximum(g.mirror_direction @ dirs.T, 0)
@@ -199,8 +200,9 @@ def _radiance_day(kind, spec, sky_type, facet_index, view="W"):
     ref = np.empty((len(facets), len(seq.times)))
     for t, s in enumerate(seq.sky.sun_direction):
         sky_text = radiance.gensky_ang(s, sky_type) + radiance.sky_glow(ground=True)
-        rgb = radiance.rtrace_scene(sky_text + obj, np.tile(seq.camera_position, (len(facets), 1)),
-                                    rays_dir)
+        rgb = radiance.rtrace_scene(
+            sky_text + obj, np.tile(seq.camera_position, (len(facets), 1)), rays_dir
+        )
         ref[:, t] = rgb[:, 1]  # grey material: R = G = B
     model = render.radiance_material_prediction(geom, seq.sky, kind, colour, spec, ground="sky")
     return seq, ref, model
@@ -233,3 +235,25 @@ def test_glossy_facets_peak_like_rtrace(sky_type, kind):
     # and the whole curve, sun up, to a few percent: a mirror ray has no sampling noise
     sun_up = seq.sky.sun_direction[:, 2] > 0.02
     np.testing.assert_allclose(model[:, sun_up], ref[:, sun_up], rtol=0.03, atol=1e-3)
+
+
+@pytest.mark.parametrize("model", ["gensky-clear", "gensky-intermediate", "perez"])
+def test_sky_quadrature_converges_near_the_sun(model):
+    # the circumsolar peak (clear: 10 exp(-3 g), a cusp at the sun) and the
+    # horizon blend are the hard parts of the diffuse integral: halving the ring
+    # width must shrink the change, and the default 3 degrees must sit within
+    # 0.1 % of the 0.25 degree answer for every facet orientation and sun
+    # (measured at 2 degrees: <= 1.8e-4 for these skies, 7e-4 for CIE type 12)
+    from bayesgloss import sky as skymod
+    from bayesgloss import sun as sunmod
+
+    rng = np.random.default_rng(7)
+    g = _geometry(_random_units(rng, 60), _random_units(rng, 60))
+    zen = np.array([5.0, 30.0, 60.0, 85.0])
+    sun = sunmod.sun_direction(zen, [100.0, 180.0, 250.0, 300.0])
+    s = skymod.daylight(model, sun)
+    res = (6.0, 3.0, 1.5, 0.25)
+    d = {r: render.diffuse_basis(g, s, resolution=r, ground="sky") for r in res}
+    err = {r: np.abs(d[r] / d[0.25] - 1).max() for r in res[:-1]}
+    assert err[3.0] < 1e-3, err
+    assert err[1.5] < err[3.0] < err[6.0], err
