@@ -34,8 +34,9 @@ def _demo(args: argparse.Namespace) -> int:
     geom, sky = seq.geometry, seq.sky
     curves = {spec: scenes.plastic_radiance(seq, specularity=spec) for spec in (0.0, 0.5, 1.0)}
     hours = seq.solar_hours
-    # the facet facing the camera most squarely, among those the sun reaches
-    facing = np.argmax(geom.cos_view)
+    # among facets seen well, the one whose matt and glossy peaks lie furthest apart
+    spread = np.abs(np.argmax(curves[0.0], 1) - np.argmax(curves[1.0], 1))
+    facing = int(np.argmax(np.where(geom.cos_view > 0.3, spread, -1)))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     ax = axes[0]
     for spec, curve in curves.items():

@@ -76,6 +76,8 @@ __all__ = [
     "diffuse_basis",
     "glossy_basis",
     "mirror_radiance",
+    "ground_plane_radiance",
+    "ground_shadow",
     "FacetBases",
     "facet_bases",
     "radiance_material_prediction",
@@ -88,6 +90,8 @@ __all__ = [
 DEFAULT_EXPONENTS = np.logspace(0.0, 4.0, 25)
 
 GROUND_MODES = ("plane", "sky")
+#: Ring width of the grid on which the object's ground shadow is integrated [deg].
+SHADOW_RESOLUTION = 6.0
 LOBES = ("phong", "lafortune")
 
 
@@ -101,10 +105,17 @@ class ViewGeometry:
         Outward unit normals.
     view_direction : ndarray (F, 3)
         Unit vectors from each facet point toward the camera.
+    center : ndarray (F, 3), optional
+        Facet points [m]; needed for the object's shadow on the ground.
+    occluder : ndarray (V, 3), optional
+        Vertices of the (convex) object that casts a shadow on the ground
+        plane [m]; None: no ground shadow.
     """
 
     normal: np.ndarray
     view_direction: np.ndarray
+    center: np.ndarray | None = None
+    occluder: np.ndarray | None = None
 
     @property
     def mirror_direction(self) -> np.ndarray:
@@ -120,10 +131,65 @@ class ViewGeometry:
         return len(self.normal)
 
 
-def view_geometry(facets: Facets, camera_position) -> ViewGeometry:
-    """Normals and view directions of facets seen from a camera position [m]."""
+def view_geometry(facets: Facets, camera_position, occluder=None) -> ViewGeometry:
+    """Normals and view directions of facets seen from a camera position [m].
+
+    Parameters
+    ----------
+    facets : Facets
+        The facets to predict (any subset of the object).
+    camera_position : array_like (3,)
+        [m]
+    occluder : Facets or array_like (V, 3), optional
+        The whole object (its facets, or its vertices), whose shadow on the
+        ground plane darkens the ground that low facets see.
+    """
     normal = np.asarray(facets.normal, dtype=float)
-    return ViewGeometry(normal, view_directions(facets.center, camera_position))
+    if isinstance(occluder, Facets):
+        occluder = np.concatenate(occluder.polygons)
+    center = np.asarray(facets.center, dtype=float)
+    occ = None if occluder is None else np.asarray(occluder, dtype=float)
+    return ViewGeometry(normal, view_directions(center, camera_position), center, occ)
+
+
+def ground_shadow(points, sun_direction, occluder) -> np.ndarray:
+    """Whether ground points lie in the shadow of a convex object.
+
+    The shadow of a convex object on the plane z = 0 is the convex hull of its
+    vertices projected along the sun direction.
+
+    Parameters
+    ----------
+    points : array_like (..., 2)
+        Ground points (x, y) [m].
+    sun_direction : array_like (T, 3)
+    occluder : array_like (V, 3)
+        Object vertices [m].
+
+    Returns
+    -------
+    ndarray of bool (..., T)
+        True in shadow; False everywhere for a sun at or below the horizon.
+    """
+    from scipy.spatial import ConvexHull
+
+    p = np.asarray(points, dtype=float)
+    sun = np.atleast_2d(np.asarray(sun_direction, dtype=float))
+    v = np.asarray(occluder, dtype=float)
+    out = np.zeros(p.shape[:-1] + (len(sun),), dtype=bool)
+    for t, s in enumerate(sun):
+        if s[2] <= 1e-6:
+            continue
+        proj = v[:, :2] - (v[:, 2:3] / s[2]) * s[:2]  # along -s down to z = 0
+        eq = ConvexHull(proj).equations  # a x + b y + c <= 0 inside
+        out[..., t] = np.max(p @ eq[:, :2].T + eq[:, 2], axis=-1) <= 0
+    return out
+
+
+def _ground_points(center, directions):
+    """Where rays from points (F, 3) along downward directions (K, 3) meet z = 0, (F, K, 2)."""
+    reach = -center[:, None, 2:3] / directions[None, :, 2:3]
+    return center[:, None, :2] + reach * directions[None, :, :2]
 
 
 @functools.lru_cache(maxsize=8)
@@ -269,6 +335,19 @@ def diffuse_components(
     weights = np.maximum(geometry.normal @ dirs.T, 0.0) * (omega / np.pi)  # (F, K)
     sky_part = weights @ radiance
     sun, e_sun = _sun_terms(sky)
+    if ground == "plane" and geometry.occluder is not None:
+        # the object's shadow takes the sun's share out of the ground's radiance;
+        # a correction term, integrated on a coarser grid of downward directions
+        d6, w6 = sphere_quadrature(SHADOW_RESOLUTION)
+        down = d6[:, 2] < 0
+        d6, w6 = d6[down], w6[down]
+        w_down = np.maximum(geometry.normal @ d6.T, 0.0) * (w6 / np.pi)  # (F, Kd)
+        seen = np.any(w_down > 0, axis=1)
+        if np.any(seen):
+            pts = _ground_points(geometry.center[seen], d6)
+            shadow = ground_shadow(pts, sun, geometry.occluder)  # (Fs, Kd, T)
+            sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
+            sky_part[seen] -= np.einsum("fk,fkt->ft", w_down[seen], shadow) * sun_share
     cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
     return sky_part, cos_i * e_sun / np.pi
 
@@ -382,6 +461,7 @@ def glossy_basis(
     if ground == "plane":
         l_ground = ground_plane_radiance(sky, ground_reflectance)
     sun, e_sun = _sun_terms(sky)
+    sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
     sun_radius = np.sqrt(sky.sun_solid_angle / np.pi)  # small-angle disc radius [rad]
 
     out = np.empty((len(normal), len(n), len(sun)))
@@ -400,7 +480,16 @@ def glossy_basis(
             h = cos_i * ((n + 2.0) / (n + 1.0))[None, :, None, None] * (wy / 2)
         radiance = sky.radiance(dirs)  # (C, N, 2U, B, T)
         if l_ground is not None:
-            radiance = np.where(dirs[..., 2:3] < 0, l_ground, radiance)
+            down = dirs[..., 2] < 0
+            radiance = np.where(down[..., None], l_ground, radiance)
+            if geometry.occluder is not None and np.any(down):
+                # nodes that see the object's shadow on the ground lose the sun's share
+                idx = np.nonzero(down)
+                c = geometry.center[sl][idx[0]]
+                m = dirs[idx]
+                pts = c[:, :2] - (c[:, 2:3] / m[:, 2:3]) * m[:, :2]
+                shadow = ground_shadow(pts, sun, geometry.occluder)  # (M, T)
+                radiance[idx] -= shadow * sun_share
         out[sl] = np.einsum("cnub,cnubt,cnu->cnt", h, radiance, weight[sl])
 
         # sun disc: lobe averaged over the disc times the disc's irradiance
@@ -430,6 +519,14 @@ def mirror_radiance(
     radiance = incident_radiance(
         sky, mirror, ground=ground, ground_reflectance=ground_reflectance
     )  # (F, T)
+    down = mirror[:, 2] < 0
+    if ground == "plane" and geometry.occluder is not None and np.any(down):
+        sun, e_sun = _sun_terms(sky)
+        c, m = geometry.center[down], mirror[down]
+        pts = c[:, :2] - (c[:, 2:3] / m[:, 2:3]) * m[:, :2]
+        shadow = ground_shadow(pts, sun, geometry.occluder)  # (Fd, T)
+        sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
+        radiance[down] -= shadow * sun_share
     sun = np.asarray(sky.sun_direction, dtype=float)
     cos_disc = np.cos(np.sqrt(sky.sun_solid_angle / np.pi))
     in_disc = (mirror @ sun.T) >= cos_disc
