@@ -16,6 +16,7 @@ import numpy as np
 __all__ = [
     "Facets",
     "tessellated_hemisphere",
+    "box",
     "view_directions",
     "CAMERA_AZIMUTHS",
     "camera_position",
@@ -118,6 +119,47 @@ def tessellated_hemisphere(
     normals, centers = zip(*(_polygon_normal_centroid(p) for p in polygons), strict=True)
     ids = np.arange(1, len(polygons) + 1)
     return Facets(ids, np.array(normals), np.array(centers), polygons)
+
+
+def box(size=(1.0, 1.0, 1.0), azimuth: float = 0.0, center=(0.0, 0.0, 0.0)) -> Facets:
+    """A box of five faces (no bottom) standing on the plane z = center[2].
+
+    Parameters
+    ----------
+    size : sequence of 3 float
+        Extent along its own x, y and z axes [m].
+    azimuth : float
+        Rotation about the vertical, degrees clockwise seen from above.
+    center : sequence of 3 float
+        Centre of its base [m].
+
+    Returns
+    -------
+    Facets
+        Faces 1-4 are the sides (facing +x, +y, -x, -y before rotation), 5 the top.
+    """
+    sx, sy, sz = (0.5 * float(size[0]), 0.5 * float(size[1]), float(size[2]))
+    if min(sx, sy, sz) <= 0:
+        raise ValueError(f"box size must be positive, got {tuple(size)}")
+    corners = {
+        (i, j, k): np.array([i * sx, j * sy, k * sz])
+        for i in (-1, 1)
+        for j in (-1, 1)
+        for k in (0, 1)
+    }
+    faces = [
+        [(1, -1, 0), (1, 1, 0), (1, 1, 1), (1, -1, 1)],
+        [(1, 1, 0), (-1, 1, 0), (-1, 1, 1), (1, 1, 1)],
+        [(-1, 1, 0), (-1, -1, 0), (-1, -1, 1), (-1, 1, 1)],
+        [(-1, -1, 0), (1, -1, 0), (1, -1, 1), (-1, -1, 1)],
+        [(-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)],
+    ]
+    a = -np.radians(azimuth)  # clockwise seen from above
+    rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    c = np.asarray(center, dtype=float)
+    polygons = [np.array([rot @ corners[v] for v in f]) + c for f in faces]
+    normals, centers = zip(*(_polygon_normal_centroid(p) for p in polygons), strict=True)
+    return Facets(np.arange(1, 6), np.array(normals), np.array(centers), polygons)
 
 
 def camera_position(

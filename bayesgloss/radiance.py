@@ -22,6 +22,7 @@ __all__ = [
     "binary",
     "run",
     "gensky_ang",
+    "gendaylit_ang",
     "sky_glow",
     "material",
     "polygons",
@@ -105,10 +106,7 @@ def gensky_ang(
     turbidity : float, optional
         gensky's ``-t``.
     """
-    s = np.asarray(sun_direction, dtype=float)
-    altitude = np.degrees(np.arcsin(np.clip(s[2], -1, 1)))
-    azimuth_north = np.degrees(np.arctan2(s[0], s[1]))  # clockwise from north
-    azimuth_gensky = azimuth_north - 180.0  # from south, positive west
+    altitude, azimuth_gensky = _gensky_angles(sun_direction)
     flag = {
         "clear": ("+s" if sun else "-s"),
         "intermediate": ("+i" if sun else "-i"),
@@ -129,6 +127,45 @@ def gensky_ang(
     if turbidity is not None:
         args += ["-t", turbidity]
     return run(args).decode()
+
+
+def gendaylit_ang(
+    sun_direction,
+    direct_normal_irradiance: float,
+    diffuse_horizontal_irradiance: float,
+    *,
+    ground_reflectance: float = 0.2,
+) -> str:
+    """Radiance Perez sky description from the real ``gendaylit -ang ... -W``.
+
+    Parameters
+    ----------
+    sun_direction : array_like (3,)
+    direct_normal_irradiance, diffuse_horizontal_irradiance : float
+        Broadband irradiances [W m^-2].
+    ground_reflectance : float
+        gendaylit's ``-g`` [-].
+    """
+    altitude, azimuth_gensky = _gensky_angles(sun_direction)
+    args = [
+        "gendaylit",
+        "-ang",
+        f"{altitude:.6f}",
+        f"{azimuth_gensky:.6f}",
+        "-W",
+        f"{direct_normal_irradiance:.6g}",
+        f"{diffuse_horizontal_irradiance:.6g}",
+        "-g",
+        ground_reflectance,
+    ]
+    return run(args).decode()
+
+
+def _gensky_angles(sun_direction) -> tuple[float, float]:
+    """Solar altitude and gensky's azimuth (from south, west positive) [deg]."""
+    s = np.asarray(sun_direction, dtype=float)
+    altitude = np.degrees(np.arcsin(np.clip(s[2], -1, 1)))
+    return float(altitude), float(np.degrees(np.arctan2(s[0], s[1])) - 180.0)
 
 
 def sky_glow(ground: bool = True) -> str:

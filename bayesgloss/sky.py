@@ -1261,8 +1261,23 @@ def _gensky_builder(kind: str) -> Callable[..., DaylightSky]:
     return build
 
 
-def _clear_sky_irradiance(sun: np.ndarray, day: np.ndarray, linke_turbidity: float):
-    """Ineichen-Perez clear-sky DNI and DHI (pvlib), 0 with the sun down."""
+def clear_sky_irradiance(sun: np.ndarray, day: np.ndarray, linke_turbidity: float = 3.0):
+    """Ineichen-Perez clear-sky DNI and DHI (pvlib), 0 with the sun down.
+
+    Parameters
+    ----------
+    sun : ndarray (..., 3)
+        Sun directions.
+    day : int or ndarray
+        Day of the year (Earth-sun distance) [-].
+    linke_turbidity : float
+        [-]
+
+    Returns
+    -------
+    dni, dhi : ndarray
+        Direct normal and diffuse horizontal irradiance [W m^-2].
+    """
     import pvlib
 
     zenith = np.rad2deg(np.arccos(np.clip(sun[..., 2], -1.0, 1.0)))
@@ -1287,7 +1302,7 @@ def _clear_sky_irradiance(sun: np.ndarray, day: np.ndarray, linke_turbidity: flo
 def _irradiances(s, day, direct_normal_irradiance, diffuse_horizontal_irradiance, linke_turbidity):
     dni, dhi = direct_normal_irradiance, diffuse_horizontal_irradiance
     if dni is None or dhi is None:
-        clear_dni, clear_dhi = _clear_sky_irradiance(s, day, linke_turbidity)
+        clear_dni, clear_dhi = clear_sky_irradiance(s, day, linke_turbidity)
         dni = clear_dni if dni is None else dni
         dhi = clear_dhi if dhi is None else dhi
     return dni, dhi
