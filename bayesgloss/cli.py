@@ -8,6 +8,10 @@ demo
     frames in local solar time on 21 June at 40 N): facet radiance curves for
     matt, intermediate and glossy plastic, beside the paper's point-sun
     prediction, written as a figure.
+curves BUNDLE
+    Read a sequence bundle and print each facet's luminance per frame
+    (``-`` marks entries left out: sun below the horizon, NaN or saturated
+    pixels, too few pixels), or write them as CSV with ``--csv FILE``.
 """
 
 from __future__ import annotations
@@ -72,6 +76,59 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _format_curves(curves, bundle_path) -> str:
+    """Facet curves as a fixed-width table, one row per facet, '-' for invalid entries."""
+    import numpy as np
+
+    n_facets, n_frames = curves.luminance.shape
+    width = 9
+    lines = [
+        f"bundle {bundle_path}: {n_facets} facets x {n_frames} frames, "
+        f"{curves.statistic} luminance [{curves.unit}], frame times UTC"
+        + ("" if curves.response_known else " (camera response unknown)"),
+    ]
+    header = f"{'facet':>6} {'pixels':>7}" + "".join(
+        f" {t:>{width}}" for t in curves.times.strftime("%H:%M")
+    )
+    lines += [f"{'':>14}" + "".join(f" {f'[{i}]':>{width}}" for i in range(n_frames)), header]
+    valid = curves.valid
+    for f in range(n_facets):
+        cells = [
+            f"{curves.luminance[f, t]:>{width}.4g}" if valid[f, t] else f"{'-':>{width}}"
+            for t in range(n_frames)
+        ]
+        lines.append(f"{curves.ids[f]:>6} {curves.n_pixels[f]:>7} " + " ".join(cells))
+    counts = [
+        f"{reason} {int(np.count_nonzero(curves.flagged(reason)))}"
+        for reason in ("sun-below-horizon", "nan-pixels", "saturated", "too-few-pixels")
+    ]
+    lines.append(
+        f"left out ('-'): {np.count_nonzero(~valid)} of {valid.size}; " + ", ".join(counts)
+    )
+    return "\n".join(lines)
+
+
+def _curves(args: argparse.Namespace) -> int:
+    import warnings
+
+    from . import bundle as bundle_io
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", bundle_io.BundleWarning)
+        bundle = bundle_io.read_bundle(args.bundle)
+    for w in caught:
+        print(f"bayesgloss curves: warning: {w.message}", file=sys.stderr)
+    curves = bundle_io.facet_curves(bundle, statistic=args.statistic, min_pixels=args.min_pixels)
+    if args.csv == "-":
+        curves.to_csv(sys.stdout)
+    elif args.csv:
+        curves.to_csv(args.csv)
+        print(f"bayesgloss curves: {curves.luminance.size} rows written to {args.csv}")
+    else:
+        print(_format_curves(curves, args.bundle))
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -79,6 +136,17 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     d.add_argument("--view", default="W", choices=["W", "SW", "S", "SE", "E"])
     d.set_defaults(func=_demo)
+    c = sub.add_parser("curves", help="facet luminance curves of a sequence bundle")
+    c.add_argument("bundle", help="sequence bundle folder (holding sequence.json)")
+    c.add_argument("--csv", metavar="FILE", help="write CSV to FILE ('-' for stdout)")
+    c.add_argument("--statistic", default="mean", choices=["mean", "median"])
+    c.add_argument(
+        "--min-pixels",
+        type=int,
+        default=4,
+        help="facets with fewer pixels are left out (default: 4)",
+    )
+    c.set_defaults(func=_curves)
     return p
 
 

@@ -1,0 +1,1638 @@
+"""Sequence bundles: image codecs, reading and writing ``bayesgloss-sequence/1``.
+
+A sequence bundle (``shared/spec/sequence-bundle.md``) is one folder holding
+what a static camera saw of one object over a day::
+
+    my-bundle/
+      sequence.json   manifest: site, camera, frames (file, time), facets, ...
+      frames/...      one image a frame
+      facets.png      facet label image: pixel value k > 0 is facet k
+
+This module reads and writes bundles and reduces them to facet curves, the
+observations of the likelihood: for each facet and frame a robust summary
+(mean or median) of the luminance of the facet's pixels.
+
+Images
+------
+Radiance RGBE pictures (``.hdr``/``.pic``) are decoded by this module's own
+codec (:func:`read_hdr`, :func:`write_hdr`); PNG (8 or 16 bit, all 16 bits
+kept) through ``pypng``; TIFF (8/16-bit integer, float) through ``tifffile``;
+OpenEXR through the optional ``openexr`` package. The format is recognised by
+the file's magic bytes, not its suffix.
+
+Pixel encodings (``camera.pixel_encoding``)
+-------------------------------------------
+Integer images are first normalised by their top code (255, 65535, ...);
+a pixel with any channel at the top code is *saturated*. Then
+
+``linear-radiance``
+    RGB radiance, W sr^-1 m^-2; the luminance is 179 (0.265 R + 0.670 G +
+    0.065 B) cd m^-2. Needs a floating-point image (Radiance, float TIFF,
+    EXR): a bundle that pairs it with integer frames is rejected.
+``linear``
+    linear in radiance with an unknown scale; luminance in relative units.
+``srgb``
+    the sRGB transfer curve (IEC 61966-2-1), inverted.
+``gamma:G``
+    value = linear^(1/G), inverted as linear = value^G.
+``unknown``
+    a monotone response that is not known: the normalised code values pass
+    through unchanged and :attr:`FacetCurves.response_known` is False, so
+    the likelihood can model the response.
+
+Bad bundles
+-----------
+Following the spec, a reader *rejects* with :class:`BundleError` (which
+names the bundle, the field and the problem): a missing or unreadable
+manifest, frame or label image; frames of different sizes or a label image
+of another size; a time with no UTC offset; a normal that is not of unit
+length within 1e-3; a latitude outside [-90, 90] or a longitude outside
+[-180, 180]; a facet id that ``facets.png`` never holds; a wrong ``format``
+literal, a missing or ill-typed required field, an empty frame or facet
+list, a duplicate facet id. It *reports* in the facet curves' ``valid`` mask
+and ``flags``, and does not reject: frames with the sun below the horizon,
+NaN or infinite pixels, saturated pixels, and facets with fewer than
+``min_pixels`` (default :data:`MIN_PIXELS` = 4) labelled pixels.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import shutil
+import struct
+import tempfile
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+
+from . import sun as _sun
+from .geometry import Facets
+from .reflectance import LUMINANCE_WEIGHTS
+
+__all__ = [
+    "FLAG_REASONS",
+    "FORMAT",
+    "FRAME_FORMATS",
+    "LUMINOUS_EFFICACY",
+    "MANIFEST",
+    "LABELS",
+    "MIN_PIXELS",
+    "PIXEL_ENCODINGS",
+    "STATISTICS",
+    "Bundle",
+    "BundleError",
+    "BundleWarning",
+    "FacetCurves",
+    "ImageInfo",
+    "Site",
+    "decode_pixels",
+    "facet_curves",
+    "image_info",
+    "linear_to_srgb",
+    "parse_pixel_encoding",
+    "read_bundle",
+    "read_exr",
+    "read_hdr",
+    "read_image",
+    "read_png",
+    "read_tiff",
+    "srgb_to_linear",
+    "write_bundle",
+    "write_exr",
+    "write_hdr",
+    "write_png",
+    "write_tiff",
+]
+
+#: The ``format`` literal of the manifest this module reads and writes.
+FORMAT = "bayesgloss-sequence/1"
+#: File names inside a bundle.
+MANIFEST = "sequence.json"
+LABELS = "facets.png"
+#: Facets with fewer labelled pixels are reported as ``too-few-pixels``.
+MIN_PIXELS = 4
+#: Radiance's luminous efficacy of its radiance unit, lm W^-1 (cd m^-2 per
+#: W sr^-1 m^-2).
+LUMINOUS_EFFICACY = 179.0
+#: Names of ``camera.pixel_encoding`` (``gamma:G`` takes a positive G).
+PIXEL_ENCODINGS = ("linear-radiance", "linear", "srgb", "gamma:G", "unknown")
+#: Reasons an observation is left out, in the order of :attr:`FacetCurves.flag_bits`.
+FLAG_REASONS = ("sun-below-horizon", "nan-pixels", "saturated", "too-few-pixels")
+#: Robust summaries of a facet's pixel luminances.
+STATISTICS = ("mean", "median")
+#: ``frame_format`` of :func:`write_bundle`: file suffix of each.
+FRAME_FORMATS = {
+    "hdr": ".hdr",
+    "png16": ".png",
+    "png8": ".png",
+    "tiff": ".tif",
+    "tiff16": ".tif",
+    "exr": ".exr",
+}
+
+_NORMAL_TOLERANCE = 1e-3
+_WEIGHTS = np.asarray(LUMINANCE_WEIGHTS, dtype=float)
+
+
+# ---------------------------------------------------------------------------
+# errors
+# ---------------------------------------------------------------------------
+
+
+class BundleError(ValueError):
+    """A bundle that breaks the spec: names the bundle, the field and the problem.
+
+    Attributes
+    ----------
+    bundle : str
+        The bundle's folder as given.
+    field : str
+        The manifest field (``"frames[3].time"``) or file (``"facets.png"``).
+    problem : str
+        What is wrong, with the bad value.
+    """
+
+    def __init__(self, bundle: Any, field: str, problem: str):
+        self.bundle = str(bundle)
+        self.field = field
+        self.problem = problem
+        super().__init__(f"bundle '{self.bundle}': field '{field}': {problem}")
+
+    def __reduce__(self):
+        return (type(self), (self.bundle, self.field, self.problem))
+
+
+class BundleWarning(UserWarning):
+    """Something odd in a bundle that the spec does not make an error."""
+
+
+# ---------------------------------------------------------------------------
+# Radiance RGBE pictures
+# ---------------------------------------------------------------------------
+
+_HDR_FORMAT = "32-bit_rle_rgbe"
+_RLE_MIN_LENGTH, _RLE_MAX_LENGTH = 8, 0x7FFF  # new-style run-length scanline lengths
+_RLE_MIN_RUN = 4  # shortest run the writer encodes as a run (Radiance's MINRUN)
+
+
+class _HdrHeader(NamedTuple):
+    shape: tuple[int, int]  # stored (scanlines, scanline length)
+    axes: tuple[str, str]  # e.g. ("-Y", "+X")
+    exposure: float
+    colorcorr: np.ndarray
+    data_start: int
+
+
+def _parse_hdr_header(data: bytes) -> _HdrHeader:
+    """Header, resolution string and pixel-data offset of a Radiance picture."""
+    if not data.startswith(b"#?"):
+        raise ValueError("not a Radiance picture (no '#?' magic line)")
+    end = data.find(b"\n\n")
+    if end < 0:
+        raise ValueError("Radiance header has no terminating blank line")
+    exposure, colorcorr = 1.0, np.ones(3)
+    for raw in data[:end].split(b"\n")[1:]:
+        line = raw.decode("latin-1").strip()
+        key, _, value = line.partition("=")
+        key = key.strip()
+        try:
+            if key == "FORMAT" and value.strip() != _HDR_FORMAT:
+                raise ValueError(f"unsupported FORMAT={value.strip()} (need {_HDR_FORMAT})")
+            if key == "EXPOSURE":
+                exposure *= float(value)  # cumulative: divide the pixels by the product
+            elif key == "COLORCORR":
+                colorcorr = colorcorr * np.array([float(v) for v in value.split()[:3]])
+        except ValueError as err:
+            if "FORMAT" in str(err):
+                raise
+            raise ValueError(f"bad header line {line!r}") from None
+    if not (exposure > 0 and np.isfinite(exposure)) or not np.all(colorcorr > 0):
+        raise ValueError(f"bad EXPOSURE {exposure} or COLORCORR {colorcorr}")
+    start = end + 2
+    stop = data.find(b"\n", start)
+    if stop < 0:
+        raise ValueError("missing resolution string")
+    tokens = data[start:stop].decode("latin-1").split()
+    try:
+        if len(tokens) != 4 or {tokens[0][1], tokens[2][1]} != {"X", "Y"}:
+            raise ValueError
+        if tokens[0][0] not in "+-" or tokens[2][0] not in "+-" or len(tokens[0]) != 2:
+            raise ValueError
+        shape = (int(tokens[1]), int(tokens[3]))
+    except (ValueError, IndexError):
+        raise ValueError(f"bad resolution string {' '.join(tokens)!r}") from None
+    if min(shape) < 1:
+        raise ValueError(f"bad resolution string {' '.join(tokens)!r}")
+    return _HdrHeader(shape, (tokens[0], tokens[2]), exposure, colorcorr, stop + 1)
+
+
+def _decode_old_scanline(data: bytes, pos: int, out: np.ndarray, y: int) -> int:
+    """Flat pixels with old-style (1, 1, 1, n) repeat codes; returns the new offset."""
+    length = len(out)
+    chunk = np.frombuffer(data, np.uint8, min(4 * length, len(data) - pos) // 4 * 4, pos)
+    chunk = chunk.reshape(-1, 4)
+    if len(chunk) == length and not np.any(np.all(chunk[:, :3] == 1, axis=1)):
+        out[:] = chunk  # flat scanline: no repeat codes
+        return pos + 4 * length
+    x, shift = 0, 0
+    while x < length:
+        if pos + 4 > len(data):
+            raise ValueError(f"pixel data end early, in scanline {y}")
+        pixel = data[pos : pos + 4]
+        pos += 4
+        if pixel[0] == 1 and pixel[1] == 1 and pixel[2] == 1:
+            count = pixel[3] << shift
+            if x == 0 or x + count > length:
+                raise ValueError(f"bad old-style run in scanline {y}")
+            out[x : x + count] = out[x - 1]
+            x += count
+            shift += 8
+        else:
+            out[x] = np.frombuffer(pixel, np.uint8)
+            x += 1
+            shift = 0
+    return pos
+
+
+def _decode_rle_scanline(data: bytes, pos: int, planes: bytearray, base: int, length: int, y: int):
+    """One new-style run-length scanline into four component planes."""
+    size = len(data)
+    for component in range(4):
+        x = base + component * length
+        stop = x + length
+        while x < stop:
+            if pos >= size:
+                raise ValueError(f"pixel data end early, in scanline {y}")
+            count = data[pos]
+            pos += 1
+            if count > 128:  # a run of (count - 128) copies of the next byte
+                count -= 128
+                if x + count > stop or pos >= size:
+                    raise ValueError(f"run overruns scanline {y}")
+                planes[x : x + count] = data[pos : pos + 1] * count
+                pos += 1
+            else:  # count literal bytes
+                if count == 0 or x + count > stop or pos + count > size:
+                    raise ValueError(f"bad literal count in scanline {y}")
+                planes[x : x + count] = data[pos : pos + count]
+                pos += count
+            x += count
+    return pos
+
+
+def _decode_rgbe(data: bytes, pos: int, n_lines: int, length: int) -> np.ndarray:
+    """RGBE bytes of ``n_lines`` scanlines, shape (n_lines, length, 4)."""
+    out = np.empty((n_lines, length, 4), np.uint8)
+    new_style = _RLE_MIN_LENGTH <= length <= _RLE_MAX_LENGTH
+    planes = bytearray(4 * length)
+    for y in range(n_lines):
+        if (
+            new_style
+            and pos + 4 <= len(data)
+            and data[pos] == 2
+            and data[pos + 1] == 2
+            and not data[pos + 2] & 0x80
+        ):
+            if (data[pos + 2] << 8 | data[pos + 3]) != length:
+                raise ValueError(f"scanline {y} has the wrong length")
+            pos = _decode_rle_scanline(data, pos + 4, planes, 0, length, y)
+            out[y] = np.frombuffer(planes, np.uint8).reshape(4, length).T
+        else:
+            pos = _decode_old_scanline(data, pos, out[y], y)
+    return out
+
+
+def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
+    """Decode RGBE bytes (..., 4) to float32 RGB (..., 3).
+
+    Radiance's ``colr_color``: ``(mantissa + 0.5) 2^(exponent - 136)``, and 0
+    for exponent byte 0.
+    """
+    rgbe = np.asarray(rgbe, dtype=np.uint8)
+    exponent = rgbe[..., 3:].astype(np.int32)
+    scale = np.where(exponent > 0, np.ldexp(np.float32(1.0), exponent - 136), np.float32(0.0))
+    return (rgbe[..., :3].astype(np.float32) + np.float32(0.5)) * scale.astype(np.float32)
+
+
+def float_to_rgbe(rgb: np.ndarray) -> np.ndarray:
+    """Encode RGB (..., 3) >= 0 as RGBE bytes (..., 4), as Radiance's ``setcolr``."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    peak = np.max(rgb, axis=-1)
+    mantissa, exponent = np.frexp(peak)  # peak = mantissa 2^exponent, mantissa in [0.5, 1)
+    positive = peak > 1e-32
+    scale = np.divide(mantissa * 256.0, peak, out=np.zeros_like(peak), where=positive)
+    out = np.zeros(rgb.shape[:-1] + (4,), np.uint8)
+    out[..., :3] = np.clip(np.floor(rgb * scale[..., None]), 0, 255)
+    out[..., 3] = np.where(positive, exponent + 128, 0)
+    return out
+
+
+def read_hdr(path: str | os.PathLike) -> np.ndarray:
+    """Read a Radiance RGBE picture.
+
+    Reads flat, old-style and new-style run-length scanlines in any of the
+    eight orientations of the resolution string, and divides by the
+    cumulative ``EXPOSURE`` and ``COLORCORR`` of the header, so the values
+    are the picture's original radiance.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The picture file. -
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W, 3)
+        RGB, top row first, in the picture's unit (W sr^-1 m^-2 for
+        Radiance renderings). RGBE keeps an 8-bit mantissa shared by the three
+        channels: each channel is within ``max(R, G, B) / 256`` of the value
+        encoded.
+
+    Raises
+    ------
+    ValueError
+        For a file that is not a valid ``32-bit_rle_rgbe`` picture.
+    """
+    data = Path(path).read_bytes()
+    header = _parse_hdr_header(data)
+    n_lines, length = header.shape
+    rgb = rgbe_to_float(_decode_rgbe(data, header.data_start, n_lines, length))
+    if header.axes[0][1] == "X":  # scanlines are columns
+        rgb = rgb.transpose(1, 0, 2)
+        axis_y, axis_x = header.axes[1], header.axes[0]
+    else:
+        axis_y, axis_x = header.axes
+    if axis_y[0] == "+":  # stored bottom to top
+        rgb = rgb[::-1]
+    if axis_x[0] == "-":  # stored right to left
+        rgb = rgb[:, ::-1]
+    correction = (header.exposure * header.colorcorr).astype(np.float32)
+    if np.any(correction != 1):
+        rgb = rgb / correction
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def _encode_rle_plane(plane: np.ndarray, out: bytearray) -> None:
+    """Append one component of a scanline in new-style run-length code."""
+    length = len(plane)
+    starts = np.flatnonzero(np.diff(plane)) + 1
+    starts = np.concatenate([[0], starts])
+    counts = np.diff(np.concatenate([starts, [length]]))
+    long_runs = counts >= _RLE_MIN_RUN
+    literal_from = 0
+    raw = plane.tobytes()
+    for start, count in zip(starts[long_runs].tolist(), counts[long_runs].tolist(), strict=True):
+        for chunk in range(literal_from, start, 128):
+            n = min(128, start - chunk)
+            out.append(n)
+            out += raw[chunk : chunk + n]
+        literal_from = start + count
+        value = raw[start]
+        while count > 0:
+            n = min(127, count)
+            out.append(128 + n)
+            out.append(value)
+            count -= n
+    for chunk in range(literal_from, length, 128):
+        n = min(128, length - chunk)
+        out.append(n)
+        out += raw[chunk : chunk + n]
+
+
+def write_hdr(
+    path: str | os.PathLike,
+    rgb: np.ndarray,
+    *,
+    rle: bool = True,
+    header: Sequence[str] = (),
+) -> None:
+    """Write a Radiance RGBE picture (``-Y H +X W``, top row first).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file. -
+    rgb : array_like, shape (H, W, 3) or (H, W)
+        Non-negative finite values, e.g. radiance, W sr^-1 m^-2; a grey image
+        is written with equal channels.
+    rle : bool, default True
+        New-style run-length scanlines (as Radiance writes them, for widths
+        8-32767); False writes flat pixels. -
+    header : sequence of str
+        Extra header lines (no ``=`` line may be ``FORMAT``). -
+
+    Raises
+    ------
+    ValueError
+        For negative, NaN or infinite values, or values beyond RGBE's range
+        (about 1.7e38).
+    """
+    arr = np.asarray(rgb, dtype=np.float64)
+    if arr.ndim == 2:
+        arr = np.repeat(arr[..., None], 3, axis=-1)
+    if arr.ndim != 3 or arr.shape[-1] != 3 or min(arr.shape[:2]) < 1:
+        raise ValueError(f"rgb must have shape (H, W, 3) or (H, W), got {np.shape(rgb)}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr >= 2.0**127):
+        raise ValueError("a Radiance picture holds finite values in [0, 1.7e38) only")
+    height, width = arr.shape[:2]
+    lines = ["#?RADIANCE", "bayesgloss.bundle.write_hdr", *header, f"FORMAT={_HDR_FORMAT}"]
+    out = bytearray(("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii"))
+    rgbe = float_to_rgbe(arr)
+    if not rle or not _RLE_MIN_LENGTH <= width <= _RLE_MAX_LENGTH:
+        out += rgbe.tobytes()
+    else:
+        mark = bytes([2, 2, width >> 8, width & 0xFF])
+        planes = np.ascontiguousarray(rgbe.transpose(0, 2, 1))  # (H, 4, W)
+        for row in planes:
+            out += mark
+            for plane in row:
+                _encode_rle_plane(plane, out)
+    Path(path).write_bytes(bytes(out))
+
+
+# ---------------------------------------------------------------------------
+# PNG, TIFF, EXR
+# ---------------------------------------------------------------------------
+
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+class ImageInfo(NamedTuple):
+    """What an image file holds, from its header alone."""
+
+    height: int
+    width: int
+    channels: int
+    dtype: np.dtype  # sample type as read (uint8, uint16, float16/32/64)
+    kind: str  # "hdr", "png", "tiff" or "exr"
+
+
+def _kind(path: Path) -> str:
+    with open(path, "rb") as f:
+        magic = f.read(8)
+    if magic.startswith(b"#?"):
+        return "hdr"
+    if magic == _PNG_MAGIC:
+        return "png"
+    if magic[:4] in _TIFF_MAGIC:
+        return "tiff"
+    if magic[:4] == _EXR_MAGIC:
+        return "exr"
+    raise ValueError(
+        f"{path.name}: not a Radiance picture, PNG, TIFF or OpenEXR file (magic bytes {magic!r})"
+    )
+
+
+def read_png(path: str | os.PathLike) -> tuple[np.ndarray, int]:
+    """Read a PNG keeping every bit (pypng; 16-bit RGB keeps its low byte).
+
+    Returns
+    -------
+    pixels : ndarray of uint8 or uint16, shape (H, W) or (H, W, C)
+        Code values as stored, palette expanded; C is 2 (grey, alpha), 3
+        (RGB) or 4 (RGBA).
+    max_code : int
+        The top code, ``2**bitdepth - 1`` (255, 65535, or 1-15 for low
+        bit depths).
+    """
+    import png
+
+    width, height, rows, info = png.Reader(filename=os.fspath(path)).asDirect()
+    depth = info["bitdepth"]
+    dtype = np.uint16 if depth > 8 else np.uint8
+    planes = info["planes"]
+    pixels = np.empty((height, width * planes), dtype)
+    for y, row in enumerate(rows):
+        pixels[y] = row
+    pixels = pixels.reshape(height, width, planes)
+    return (pixels[..., 0] if planes == 1 else pixels), (1 << depth) - 1
+
+
+def write_png(path: str | os.PathLike, pixels: np.ndarray) -> None:
+    """Write a grey (H, W) or RGB (H, W, 3) uint8 or uint16 array as PNG."""
+    import png
+
+    arr = np.asarray(pixels)
+    if arr.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"write_png needs uint8 or uint16 pixels, got {arr.dtype}")
+    if arr.ndim == 3 and arr.shape[-1] == 1:
+        arr = arr[..., 0]
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[-1] == 3)):
+        raise ValueError(f"write_png needs shape (H, W) or (H, W, 3), got {arr.shape}")
+    height, width = arr.shape[:2]
+    writer = png.Writer(
+        width, height, greyscale=arr.ndim == 2, bitdepth=8 * arr.dtype.itemsize, compression=6
+    )
+    with open(path, "wb") as f:
+        writer.write(f, arr.reshape(height, -1))
+
+
+def read_tiff(path: str | os.PathLike) -> np.ndarray:
+    """First image of a TIFF file, shape (H, W) or (H, W, C), as stored (tifffile)."""
+    import tifffile
+
+    with tifffile.TiffFile(os.fspath(path)) as tif:
+        page = tif.pages[0]
+        arr = page.asarray()
+        if arr.ndim == 3 and page.planarconfig == tifffile.PLANARCONFIG.SEPARATE:
+            arr = np.moveaxis(arr, 0, -1)
+    return arr
+
+
+def write_tiff(path: str | os.PathLike, pixels: np.ndarray) -> None:
+    """Write a grey or RGB uint8, uint16 or float32 array as TIFF (zlib)."""
+    import tifffile
+
+    arr = np.asarray(pixels)
+    if arr.dtype not in (np.uint8, np.uint16, np.float32):
+        raise ValueError(f"write_tiff needs uint8, uint16 or float32 pixels, got {arr.dtype}")
+    rgb = arr.ndim == 3 and arr.shape[-1] == 3
+    if not (arr.ndim == 2 or rgb):
+        raise ValueError(f"write_tiff needs shape (H, W) or (H, W, 3), got {arr.shape}")
+    tifffile.imwrite(
+        os.fspath(path),
+        arr,
+        photometric="rgb" if rgb else "minisblack",
+        compression="zlib",
+    )
+
+
+def _openexr():
+    try:
+        import OpenEXR
+    except ImportError:
+        raise RuntimeError(
+            "reading or writing OpenEXR needs the optional dependency 'openexr' "
+            "(pip install 'bayesgloss[exr]' or pip install openexr)"
+        ) from None
+    return OpenEXR
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    """Read the R, G, B (or Y) channels of an OpenEXR file, (H, W, 3) or (H, W) float.
+
+    Needs the optional ``openexr`` package.
+    """
+    exr = _openexr()
+    with exr.File(os.fspath(path), separate_channels=True) as f:
+        channels = {name: ch.pixels for name, ch in f.channels().items()}
+    if all(c in channels for c in "RGB"):
+        return np.stack([channels[c] for c in "RGB"], axis=-1)
+    if "Y" in channels:
+        return channels["Y"]
+    raise ValueError(f"OpenEXR file has no R, G, B or Y channels: {sorted(channels)}")
+
+
+def write_exr(path: str | os.PathLike, rgb: np.ndarray) -> None:
+    """Write (H, W, 3) float32 (or float16) RGB as a ZIP-compressed OpenEXR file."""
+    exr = _openexr()
+    arr = np.asarray(rgb)
+    if arr.dtype not in (np.float16, np.float32):
+        arr = arr.astype(np.float32)
+    if arr.ndim != 3 or arr.shape[-1] != 3:
+        raise ValueError(f"write_exr needs shape (H, W, 3), got {arr.shape}")
+    channels = {c: np.ascontiguousarray(arr[..., i]) for i, c in enumerate("RGB")}
+    header = {"compression": exr.ZIP_COMPRESSION, "type": exr.scanlineimage}
+    with exr.File(header, channels) as f:
+        f.write(os.fspath(path))
+
+
+def image_info(path: str | os.PathLike) -> ImageInfo:
+    """Size, channels and sample type of an image, from its header only."""
+    path = Path(path)
+    kind = _kind(path)
+    if kind == "hdr":
+        head = b""
+        with open(path, "rb") as f:
+            while True:  # read on until the resolution string
+                chunk = f.read(65536)
+                head += chunk
+                end = head.find(b"\n\n")
+                if not chunk or (end >= 0 and head.find(b"\n", end + 2) >= 0):
+                    break
+        header = _parse_hdr_header(head)
+        n1, n2 = header.shape
+        height, width = (n2, n1) if header.axes[0][1] == "X" else (n1, n2)
+        return ImageInfo(height, width, 3, np.dtype(np.float32), kind)
+    if kind == "png":
+        with open(path, "rb") as f:
+            head = f.read(33)
+        if len(head) < 33 or head[12:16] != b"IHDR":
+            raise ValueError(f"{path.name}: PNG without an IHDR chunk")
+        width, height, depth, colour = struct.unpack(">IIBB", head[16:26])
+        channels = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(colour)
+        if channels is None or width < 1 or height < 1:
+            raise ValueError(f"{path.name}: bad PNG header")
+        dtype = np.uint16 if depth == 16 and colour != 3 else np.uint8
+        return ImageInfo(height, width, channels, np.dtype(dtype), kind)
+    if kind == "tiff":
+        import tifffile
+
+        with tifffile.TiffFile(os.fspath(path)) as tif:
+            page = tif.pages[0]
+            return ImageInfo(
+                int(page.imagelength),
+                int(page.imagewidth),
+                int(page.samplesperpixel),
+                np.dtype(page.dtype),
+                kind,
+            )
+    exr = _openexr()
+    with exr.File(os.fspath(path), header_only=True) as f:
+        header = f.header()  # emptied when the file closes
+        low, high = (np.array(v) for v in header["dataWindow"])
+        names = {ch.name for ch in header["channels"]}
+    channels = 3 if names >= {"R", "G", "B"} else 1
+    return ImageInfo(
+        int(high[1] - low[1] + 1), int(high[0] - low[0] + 1), channels, np.dtype(np.float32), kind
+    )
+
+
+def read_image(path: str | os.PathLike) -> tuple[np.ndarray, int | None]:
+    """Read any image a bundle may hold, recognised by its magic bytes.
+
+    Returns
+    -------
+    pixels : ndarray, shape (H, W) or (H, W, C)
+        As stored: uint8/uint16 code values or floats.
+    max_code : int or None
+        Top code of an integer image (saturation level); None for floats.
+    """
+    path = Path(path)
+    kind = _kind(path)
+    if kind == "hdr":
+        return read_hdr(path), None
+    if kind == "png":
+        return read_png(path)
+    arr = read_tiff(path) if kind == "tiff" else read_exr(path)
+    if arr.dtype == np.uint8 or arr.dtype == np.uint16:
+        return arr, int(np.iinfo(arr.dtype).max)
+    if arr.dtype.kind == "f":
+        return arr, None
+    raise ValueError(f"{path.name}: unsupported sample type {arr.dtype}")
+
+
+# ---------------------------------------------------------------------------
+# pixel encodings
+# ---------------------------------------------------------------------------
+
+
+def srgb_to_linear(value: Any) -> np.ndarray:
+    """Invert the sRGB transfer curve (IEC 61966-2-1:1999, eq. for C'_sRGB).
+
+    ``linear = value / 12.92`` for value <= 0.04045, else
+    ``((value + 0.055) / 1.055) ** 2.4``.
+
+    Parameters
+    ----------
+    value : array_like
+        Encoded values, normalised to [0, 1]. -
+
+    Returns
+    -------
+    ndarray
+        Linear values, same shape; NaN stays NaN. -
+    """
+    v = np.asarray(value, dtype=float)
+    return np.where(v <= 0.04045, v / 12.92, ((np.maximum(v, 0.04045) + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(linear: Any) -> np.ndarray:
+    """The sRGB transfer curve, the inverse of :func:`srgb_to_linear`.
+
+    ``12.92 linear`` for linear <= 0.0031308, else ``1.055 linear^(1/2.4) - 0.055``.
+    """
+    v = np.asarray(linear, dtype=float)
+    return np.where(
+        v <= 0.0031308, 12.92 * v, 1.055 * np.maximum(v, 0.0031308) ** (1 / 2.4) - 0.055
+    )
+
+
+def parse_pixel_encoding(encoding: str) -> tuple[str, float | None]:
+    """Split ``camera.pixel_encoding`` into its name and gamma.
+
+    Returns
+    -------
+    name : str
+        One of ``linear-radiance``, ``linear``, ``srgb``, ``gamma``, ``unknown``.
+    gamma : float or None
+        G of ``gamma:G``, else None.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name or a ``gamma:G`` whose G is not a positive number.
+    """
+    if not isinstance(encoding, str):
+        raise ValueError(f"pixel encoding must be a string, got {encoding!r}")
+    if encoding.startswith("gamma:"):
+        try:
+            gamma = float(encoding[len("gamma:") :])
+        except ValueError:
+            gamma = math.nan
+        if not (math.isfinite(gamma) and gamma > 0):
+            raise ValueError(f"pixel encoding {encoding!r} needs a positive number G in 'gamma:G'")
+        return "gamma", gamma
+    if encoding in PIXEL_ENCODINGS and encoding != "gamma:G":
+        return encoding, None
+    raise ValueError(f"unknown pixel encoding {encoding!r}; valid: {', '.join(PIXEL_ENCODINGS)}")
+
+
+def decode_pixels(
+    pixels: np.ndarray, encoding: str, max_code: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Linear RGB and the saturation mask of stored pixels.
+
+    Parameters
+    ----------
+    pixels : ndarray, shape (..., C) with C = 3 or 4 (RGB, alpha ignored), or (...) grey
+        Code values (integer images) or floats, as :func:`read_image` gives.
+        For a grey image pass ``pixels[..., None]``. -
+    encoding : str
+        ``camera.pixel_encoding`` (see :data:`PIXEL_ENCODINGS`). -
+    max_code : int, optional
+        Top code of an integer image: values are divided by it, and a pixel
+        with any channel at it is saturated. None for float images. -
+
+    Returns
+    -------
+    rgb : ndarray of float32, shape (..., 3)
+        Linear RGB: radiance for ``linear-radiance``, relative otherwise,
+        normalised code values for ``unknown``.
+    saturated : ndarray of bool, shape (...)
+        Pixels at the top code in any channel (all False for floats).
+    """
+    name, gamma = parse_pixel_encoding(encoding)
+    arr = np.asarray(pixels)
+    channels = arr.shape[-1]
+    if channels in (1, 2):  # grey (+ alpha): equal RGB; luminance weights sum to 1
+        arr = np.repeat(arr[..., :1], 3, axis=-1)
+    elif channels in (3, 4):
+        arr = arr[..., :3]
+    else:
+        raise ValueError(f"pixels need 1-4 channels on the last axis, got {channels}")
+    if max_code is None:
+        saturated = np.zeros(arr.shape[:-1], bool)
+        value = arr.astype(np.float32, copy=False)
+    else:
+        saturated = np.any(arr >= max_code, axis=-1)
+        value = arr.astype(np.float32) / np.float32(max_code)
+    if name == "srgb":
+        value = srgb_to_linear(value).astype(np.float32)
+    elif name == "gamma":
+        value = np.power(np.maximum(value, 0), np.float32(gamma), dtype=np.float32)
+    return value, saturated
+
+
+# ---------------------------------------------------------------------------
+# the manifest
+# ---------------------------------------------------------------------------
+
+
+class Site(NamedTuple):
+    """Where the camera stood: deg north, deg east (positive), m above sea level."""
+
+    latitude: float
+    longitude: float
+    elevation: float = 0.0
+
+
+class _Manifest(NamedTuple):
+    site: Site
+    camera_position: np.ndarray
+    pixel_encoding: str
+    encoding_gamma: float | None
+    ground_reflectance: float | None
+    frame_files: tuple[str, ...]
+    times: pd.DatetimeIndex
+    facets: Facets
+    truth: dict | None
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+class _Checker:
+    """Field access with errors that name the bundle and the field."""
+
+    def __init__(self, bundle: Any):
+        self.bundle = bundle
+
+    def fail(self, field: str, problem: str) -> BundleError:
+        return BundleError(self.bundle, field, problem)
+
+    def get(self, obj: Mapping, key: str, where: str, kind: type, required: bool = True):
+        name = f"{where}.{key}" if where else key
+        if key not in obj or (obj[key] is None and not required):
+            if required:
+                raise self.fail(name, "missing required field")
+            return None
+        value = obj[key]
+        if kind is float:
+            if not _is_number(value):
+                raise self.fail(name, f"must be a finite number, got {value!r}")
+            return float(value)
+        if kind is int:
+            if isinstance(value, bool) or not (
+                isinstance(value, int) or (isinstance(value, float) and value.is_integer())
+            ):
+                raise self.fail(name, f"must be an integer, got {value!r}")
+            return int(value)
+        names = {dict: "an object", list: "a list", str: "a string"}
+        if not isinstance(value, kind):
+            raise self.fail(name, f"must be {names[kind]}, got {value!r}")
+        return value
+
+    def vector(self, obj: Mapping, key: str, where: str) -> np.ndarray:
+        value = self.get(obj, key, where, list)
+        if len(value) != 3 or not all(_is_number(v) for v in value):
+            raise self.fail(f"{where}.{key}", f"must be 3 finite numbers, got {value!r}")
+        return np.array(value, dtype=float)
+
+
+def _parse_time(check: _Checker, value: Any, name: str) -> pd.Timestamp:
+    if not isinstance(value, str):
+        raise check.fail(name, f"must be an ISO 8601 string, got {value!r}")
+    try:
+        stamp = _dt.datetime.fromisoformat(value)
+    except ValueError:
+        raise check.fail(name, f"time {value!r} is not an ISO 8601 time") from None
+    if stamp.tzinfo is None or stamp.utcoffset() is None:
+        raise check.fail(name, f"time {value!r} has no UTC offset")
+    return pd.Timestamp(stamp).tz_convert("UTC")
+
+
+def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
+    """Validate a manifest dict; every error names its field."""
+    check = _Checker(bundle)
+    if not isinstance(manifest, dict):
+        raise check.fail(MANIFEST, f"must hold a JSON object, got {type(manifest).__name__}")
+    fmt = check.get(manifest, "format", "", str)
+    if fmt != FORMAT:
+        raise check.fail("format", f"expected {FORMAT!r}, got {fmt!r}")
+
+    site = check.get(manifest, "site", "", dict)
+    latitude = check.get(site, "latitude", "site", float)
+    if not -90.0 <= latitude <= 90.0:
+        raise check.fail("site.latitude", f"latitude {latitude} lies outside [-90, 90]")
+    longitude = check.get(site, "longitude", "site", float)
+    if not -180.0 <= longitude <= 180.0:
+        raise check.fail("site.longitude", f"longitude {longitude} lies outside [-180, 180]")
+    elevation = check.get(site, "elevation", "site", float, required=False)
+    site = Site(latitude, longitude, 0.0 if elevation is None else elevation)
+
+    camera = check.get(manifest, "camera", "", dict)
+    position = check.vector(camera, "position", "camera")
+    encoding = check.get(camera, "pixel_encoding", "camera", str)
+    try:
+        name, gamma = parse_pixel_encoding(encoding)
+    except ValueError as err:
+        raise check.fail("camera.pixel_encoding", str(err)) from None
+
+    ground = check.get(manifest, "ground_reflectance", "", float, required=False)
+    if ground is not None and not 0.0 <= ground <= 1.0:
+        raise check.fail("ground_reflectance", f"must lie in [0, 1], got {ground}")
+
+    frames = check.get(manifest, "frames", "", list)
+    if not frames:
+        raise check.fail("frames", "the frame list is empty")
+    files, times = [], []
+    for i, frame in enumerate(frames):
+        where = f"frames[{i}]"
+        if not isinstance(frame, dict):
+            raise check.fail(where, f"must be an object, got {frame!r}")
+        file = check.get(frame, "file", where, str)
+        if not file or Path(file).is_absolute():
+            raise check.fail(
+                f"{where}.file", f"must be a path relative to the bundle, got {file!r}"
+            )
+        files.append(file)
+        times.append(_parse_time(check, check.get(frame, "time", where, str), f"{where}.time"))
+
+    facet_list = check.get(manifest, "facets", "", list)
+    if not facet_list:
+        raise check.fail("facets", "the facet list is empty")
+    ids, normals, centers, seen = [], [], [], {}
+    for i, facet in enumerate(facet_list):
+        where = f"facets[{i}]"
+        if not isinstance(facet, dict):
+            raise check.fail(where, f"must be an object, got {facet!r}")
+        fid = check.get(facet, "id", where, int)
+        if not 1 <= fid <= 65535:
+            raise check.fail(f"{where}.id", f"facet id {fid} must lie in 1-65535")
+        if fid in seen:
+            raise check.fail(f"{where}.id", f"facet id {fid} repeats facets[{seen[fid]}]")
+        seen[fid] = i
+        normal = check.vector(facet, "normal", where)
+        norm = float(np.linalg.norm(normal))
+        if abs(norm - 1.0) > _NORMAL_TOLERANCE:
+            raise check.fail(
+                f"{where}.normal",
+                f"normal {normal.tolist()} has length {norm:.6g}, not 1 within {_NORMAL_TOLERANCE}",
+            )
+        ids.append(fid)
+        normals.append(normal)
+        centers.append(check.vector(facet, "center", where))
+    facets = Facets(np.array(ids, dtype=int), np.array(normals), np.array(centers))
+
+    truth = check.get(manifest, "truth", "", dict, required=False)
+    return _Manifest(
+        site,
+        position,
+        encoding,
+        gamma,
+        ground,
+        tuple(files),
+        pd.DatetimeIndex(times),
+        facets,
+        truth,
+    )
+
+
+# ---------------------------------------------------------------------------
+# bundles
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Bundle:
+    """A sequence bundle read and checked by :func:`read_bundle`; frames stay on disk.
+
+    Attributes
+    ----------
+    path : Path
+        The bundle folder.
+    manifest : dict
+        ``sequence.json`` as parsed (unknown fields included).
+    site : Site
+        Latitude (deg, north positive), longitude (deg, east positive),
+        elevation (m).
+    camera_position : ndarray (3,)
+        Camera's centre of projection, world frame, m.
+    pixel_encoding : str
+        ``camera.pixel_encoding`` as written, e.g. ``"gamma:2.2"``.
+    encoding_gamma : float or None
+        G of a ``gamma:G`` encoding.
+    ground_reflectance : float or None
+        Albedo of the surrounding ground, -.
+    times : pandas.DatetimeIndex
+        Frame times, tz-aware, UTC.
+    frame_files : tuple of Path
+        Frame image files.
+    facets : Facets
+        Ids, unit normals and centres (m) of the facets; no polygons.
+    labels : ndarray (H, W) of int
+        ``facets.png``: facet id per pixel, 0 background.
+    solar_zenith, solar_azimuth : ndarray (T,)
+        Apparent sun position (SPA, refraction corrected) at the site and
+        frame times, deg (azimuth clockwise from north).
+    sun_direction : ndarray (T, 3)
+        Unit vectors toward the apparent sun, world frame.
+    truth : dict or None
+        What made the bundle. Estimators must not read it.
+    """
+
+    path: Path
+    manifest: dict = field(repr=False)
+    site: Site
+    camera_position: np.ndarray
+    pixel_encoding: str
+    encoding_gamma: float | None
+    ground_reflectance: float | None
+    times: pd.DatetimeIndex = field(repr=False)
+    frame_files: tuple = field(repr=False)
+    facets: Facets = field(repr=False)
+    labels: np.ndarray = field(repr=False)
+    solar_zenith: np.ndarray = field(repr=False)
+    solar_azimuth: np.ndarray = field(repr=False)
+    sun_direction: np.ndarray = field(repr=False)
+    truth: dict | None = field(repr=False, default=None)
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Frame size (H, W) in pixels."""
+        return tuple(self.labels.shape)
+
+    @property
+    def sun_up(self) -> np.ndarray:
+        """Frames with the apparent sun's centre above the horizon, (T,) bool."""
+        return self.solar_zenith < 90.0
+
+    @property
+    def response_known(self) -> bool:
+        """False for ``pixel_encoding`` ``unknown``."""
+        return self.pixel_encoding != "unknown"
+
+    def view_geometry(self, occluder=None):
+        """Facet normals and view directions (:func:`bayesgloss.render.view_geometry`)."""
+        from .render import view_geometry
+
+        return view_geometry(self.facets, self.camera_position, occluder)
+
+    def read_frame(self, index: int) -> tuple[np.ndarray, int | None]:
+        """Frame ``index`` as stored: (pixels, max_code) of :func:`read_image`.
+
+        Raises BundleError for an unreadable frame or one of the wrong size.
+        """
+        name = f"frames[{index}].file"
+        path = self.frame_files[index]
+        try:
+            pixels, max_code = read_image(path)
+        except Exception as err:
+            raise BundleError(self.path, name, f"cannot read '{path}': {err}") from err
+        if pixels.shape[:2] != self.shape:
+            raise BundleError(
+                self.path,
+                name,
+                f"frame is {_size(pixels.shape)}, the labels are {_size(self.shape)}",
+            )
+        return pixels, max_code
+
+    def linear_frame(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Frame ``index`` decoded by the bundle's pixel encoding.
+
+        Returns
+        -------
+        rgb : ndarray of float32 (H, W, 3)
+            Linear RGB (radiance, W sr^-1 m^-2, for ``linear-radiance``).
+        saturated : ndarray of bool (H, W)
+        """
+        pixels, max_code = self.read_frame(index)
+        if pixels.ndim == 2:
+            pixels = pixels[..., None]
+        return decode_pixels(pixels, self.pixel_encoding, max_code)
+
+
+def _size(shape) -> str:
+    return f"{shape[1]}x{shape[0]} pixels"
+
+
+def read_bundle(path: str | os.PathLike) -> Bundle:
+    """Read and check a sequence bundle (``bayesgloss-sequence/1``).
+
+    Reads the manifest and the label image and every frame's header (size,
+    sample type) but no frame pixels; :func:`facet_curves` reads those one
+    frame at a time.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The bundle folder. -
+
+    Returns
+    -------
+    Bundle
+
+    Raises
+    ------
+    BundleError
+        For every case the spec rejects (see the module docstring), naming
+        the bundle, the field and the problem.
+    """
+    root = Path(path)
+    check = _Checker(path)
+    manifest_path = root / MANIFEST
+    if not root.is_dir():
+        raise check.fail(MANIFEST, f"no bundle folder '{root}'")
+    try:
+        text = manifest_path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise check.fail(MANIFEST, f"missing manifest '{manifest_path}'") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise check.fail(MANIFEST, f"cannot read the manifest: {err}") from None
+    try:
+        manifest = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise check.fail(MANIFEST, f"not valid JSON: {err}") from None
+    parsed = _parse_manifest(manifest, path)
+
+    # label image
+    labels_path = root / LABELS
+    if not labels_path.is_file():
+        raise check.fail(LABELS, f"missing label image '{labels_path}'")
+    try:
+        if _kind(labels_path) != "png":
+            raise ValueError("not a PNG file")
+        labels, _ = read_png(labels_path)
+    except Exception as err:
+        raise check.fail(LABELS, f"cannot read the label image: {err}") from None
+    if labels.ndim != 2 or labels.dtype.kind != "u":
+        raise check.fail(LABELS, f"must be a grey 8- or 16-bit PNG, got shape {labels.shape}")
+    counts = np.bincount(labels.ravel())
+    ids = parsed.facets.ids
+    held = counts[np.minimum(ids, len(counts) - 1)] * (ids < len(counts))
+    missing = ids[held == 0]
+    if len(missing):
+        index = int(np.flatnonzero(held == 0)[0])
+        raise check.fail(
+            f"facets[{index}].id",
+            f"facet id {int(missing[0])} never occurs in {LABELS}"
+            + (f" (nor do {len(missing) - 1} more ids)" if len(missing) > 1 else ""),
+        )
+    present = np.flatnonzero(counts[1:]) + 1
+    unlisted = np.setdiff1d(present, ids)
+    if len(unlisted):
+        warnings.warn(
+            f"bundle '{path}': {LABELS} holds {len(unlisted)} labels that no facet lists "
+            f"(e.g. {unlisted[:5].tolist()}); their pixels are ignored",
+            BundleWarning,
+            stacklevel=2,
+        )
+
+    # frames: presence, size and sample type from the headers
+    files = []
+    integer_frames = False
+    for i, name in enumerate(parsed.frame_files):
+        file = root / name
+        where = f"frames[{i}].file"
+        if not file.is_file():
+            raise check.fail(where, f"missing frame '{name}'")
+        try:
+            info = image_info(file)
+        except Exception as err:
+            raise check.fail(where, f"cannot read frame '{name}': {err}") from None
+        if (info.height, info.width) != labels.shape:
+            raise check.fail(
+                where,
+                f"frame '{name}' is {_size((info.height, info.width))}, but "
+                + (
+                    f"frames[0] is {_size(labels.shape)}"
+                    if i
+                    else f"{LABELS} is {_size(labels.shape)}"
+                ),
+            )
+        integer_frames |= info.dtype.kind in "ui"
+        if info.dtype.kind in "ui" and parsed.pixel_encoding == "linear-radiance":
+            raise check.fail(
+                where,
+                f"frame '{name}' holds {8 * info.dtype.itemsize}-bit integer codes, which "
+                "cannot be pixel_encoding 'linear-radiance' (radiance needs a float image: "
+                "Radiance, float TIFF or EXR; use 'linear' for integer linear images)",
+            )
+        files.append(file)
+
+    position = _sun.solar_position(
+        parsed.times, parsed.site.latitude, parsed.site.longitude, parsed.site.elevation
+    )
+    zenith = position["solar_zenith"]
+    azimuth = position["solar_azimuth"]
+    return Bundle(
+        path=root,
+        manifest=manifest,
+        site=parsed.site,
+        camera_position=parsed.camera_position,
+        pixel_encoding=parsed.pixel_encoding,
+        encoding_gamma=parsed.encoding_gamma,
+        ground_reflectance=parsed.ground_reflectance,
+        times=parsed.times,
+        frame_files=tuple(files),
+        facets=parsed.facets,
+        labels=labels,
+        solar_zenith=zenith,
+        solar_azimuth=azimuth,
+        sun_direction=_sun.sun_direction(zenith, azimuth),
+        truth=parsed.truth,
+    )
+
+
+# ---------------------------------------------------------------------------
+# facet curves
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class FacetCurves:
+    """Per facet and frame luminance observations of a bundle.
+
+    Attributes
+    ----------
+    ids : ndarray (F,)
+        Facet ids, in manifest order.
+    times : pandas.DatetimeIndex (T,)
+        Frame times, UTC.
+    luminance : ndarray (F, T)
+        Mean or median pixel luminance of each facet in each frame, over its
+        finite, unsaturated pixels (NaN if none), in :attr:`unit`. Also given
+        for invalid entries: use :attr:`valid` to leave those out.
+    unit : str
+        ``"cd m-2"`` for ``linear-radiance`` (179 x Radiance's luminance
+        weighting of the radiance); ``"relative"`` for ``linear``, ``srgb``
+        and ``gamma:G`` (linear, unknown scale); ``"code value"`` for
+        ``unknown`` (normalised code values, 0-1 for integer images).
+    n_pixels : ndarray (F,) of int
+        Labelled pixels of each facet.
+    n_nonfinite, n_saturated : ndarray (F, T) of int
+        Pixels left out of each observation: NaN/inf, or at the top code.
+    flag_bits : ndarray (F, T) of uint8
+        Bit k set when reason ``FLAG_REASONS[k]`` applies.
+    valid : ndarray (F, T) of bool
+        Entries free of every flag: the observations for a likelihood.
+    statistic : str
+        ``"mean"`` or ``"median"``.
+    min_pixels : int
+        Facets with fewer pixels are flagged ``too-few-pixels``.
+    pixel_encoding : str
+    response_known : bool
+        False for ``unknown``: the likelihood must model the camera response.
+    solar_zenith, solar_azimuth : ndarray (T,)
+        Apparent sun position, deg.
+    sun_direction : ndarray (T, 3)
+        Unit vectors toward the sun, world frame.
+    """
+
+    ids: np.ndarray
+    times: pd.DatetimeIndex
+    luminance: np.ndarray
+    unit: str
+    n_pixels: np.ndarray
+    n_nonfinite: np.ndarray
+    n_saturated: np.ndarray
+    flag_bits: np.ndarray
+    statistic: str
+    min_pixels: int
+    pixel_encoding: str
+    response_known: bool
+    solar_zenith: np.ndarray
+    solar_azimuth: np.ndarray
+    sun_direction: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Entries with no flag, (F, T) bool."""
+        return self.flag_bits == 0
+
+    def flagged(self, reason: str) -> np.ndarray:
+        """Where one reason of :data:`FLAG_REASONS` applies, (F, T) bool."""
+        if reason not in FLAG_REASONS:
+            raise ValueError(f"unknown flag {reason!r}; valid: {', '.join(FLAG_REASONS)}")
+        return (self.flag_bits >> FLAG_REASONS.index(reason)) & 1 == 1
+
+    @property
+    def flags(self) -> np.ndarray:
+        """Reasons each entry is left out, ``;``-joined (``""`` when valid), (F, T) str."""
+        out = np.full(self.flag_bits.shape, "", dtype=object)
+        for reason in FLAG_REASONS:
+            hit = self.flagged(reason)
+            out[hit] = np.where(out[hit] == "", reason, out[hit] + ";" + reason)
+        return out.astype(str)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Long table, one row per facet and frame: id, frame, time, luminance, valid, flag."""
+        n_facets, n_frames = self.luminance.shape
+        return pd.DataFrame(
+            {
+                "id": np.repeat(self.ids, n_frames),
+                "frame": np.tile(np.arange(n_frames), n_facets),
+                "time": np.tile(self.times.strftime("%Y-%m-%dT%H:%M:%S+00:00"), n_facets),
+                "luminance": self.luminance.ravel(),
+                "valid": self.valid.ravel(),
+                "flag": self.flags.ravel(),
+            }
+        )
+
+    def to_csv(self, path_or_buffer) -> None:
+        """Write :meth:`to_frame` as CSV (luminance in :attr:`unit`)."""
+        self.to_frame().to_csv(path_or_buffer, index=False)
+
+
+def facet_curves(
+    bundle: Bundle | str | os.PathLike,
+    *,
+    statistic: str = "mean",
+    min_pixels: int = MIN_PIXELS,
+) -> FacetCurves:
+    """Luminance of each facet in each frame, with the entries to leave out.
+
+    Frames are read one at a time; per-facet sums come from ``np.bincount``
+    over the label image, medians from one sort of each frame's labelled
+    pixels by (facet, luminance).
+
+    Parameters
+    ----------
+    bundle : Bundle or path
+        A bundle or its folder. -
+    statistic : {"mean", "median"}
+        Summary of a facet's pixel luminances. -
+    min_pixels : int, default 4
+        Facets with fewer labelled pixels are flagged ``too-few-pixels``. -
+
+    Returns
+    -------
+    FacetCurves
+        Luminance in cd m^-2 for ``linear-radiance``; see
+        :attr:`FacetCurves.unit` for the others. An entry is invalid (and
+        flagged) when the sun is below the horizon, when any of the facet's
+        pixels is NaN/infinite or saturated, or when the facet has fewer than
+        ``min_pixels`` pixels; its luminance is still computed from the
+        remaining good pixels.
+
+    Raises
+    ------
+    BundleError
+        For an unreadable frame, or one of another size.
+    """
+    if statistic not in STATISTICS:
+        raise ValueError(f"unknown statistic {statistic!r}; valid: {', '.join(STATISTICS)}")
+    if isinstance(min_pixels, bool) or not isinstance(min_pixels, int | np.integer):
+        raise ValueError(f"min_pixels must be an integer, got {min_pixels!r}")
+    if not isinstance(bundle, Bundle):
+        bundle = read_bundle(bundle)
+    ids = bundle.facets.ids
+    n_facets, n_frames = len(ids), len(bundle)
+    # facet index of each labelled pixel (F for background and unlisted labels)
+    lookup = np.full(max(int(bundle.labels.max()), int(ids.max())) + 1, n_facets, np.intp)
+    lookup[ids] = np.arange(n_facets)
+    facet_of_pixel = lookup[bundle.labels.ravel()]
+    pixels = np.flatnonzero(facet_of_pixel < n_facets)
+    facet = facet_of_pixel[pixels]
+    n_pixels = np.bincount(facet, minlength=n_facets)
+    if statistic == "median":  # group pixels by facet once
+        order = np.argsort(facet, kind="stable")
+        facet, pixels = facet[order], pixels[order]
+        group_start = np.concatenate([[0], np.cumsum(n_pixels)[:-1]])
+    scale = LUMINOUS_EFFICACY if bundle.pixel_encoding == "linear-radiance" else 1.0
+
+    luminance = np.full((n_facets, n_frames), np.nan)
+    n_nonfinite = np.zeros((n_facets, n_frames), np.int64)
+    n_saturated = np.zeros((n_facets, n_frames), np.int64)
+    for t in range(n_frames):
+        stored, max_code = bundle.read_frame(t)
+        stored = stored.reshape(bundle.labels.size, -1)[pixels]
+        rgb, saturated = decode_pixels(stored, bundle.pixel_encoding, max_code)
+        y = rgb.astype(np.float64) @ _WEIGHTS * scale  # Radiance luminance weighting
+        nonfinite = ~np.isfinite(y)
+        bad = nonfinite | saturated
+        n_nonfinite[:, t] = np.bincount(facet, weights=nonfinite, minlength=n_facets)
+        n_saturated[:, t] = np.bincount(facet, weights=saturated, minlength=n_facets)
+        good = n_pixels - np.bincount(facet, weights=bad, minlength=n_facets).astype(np.int64)
+        if statistic == "mean":
+            total = np.bincount(facet, weights=np.where(bad, 0.0, y), minlength=n_facets)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                luminance[:, t] = np.where(good > 0, total / np.maximum(good, 1), np.nan)
+        else:
+            # sort within facets, bad pixels (NaN) last; median of the first `good`
+            key = np.where(bad, np.nan, y)
+            sorted_y = key[np.lexsort((key, facet))]
+            low = group_start + np.maximum(good - 1, 0) // 2
+            high = group_start + np.maximum(good, 0) // 2
+            safe = good > 0
+            med = 0.5 * (sorted_y[np.where(safe, low, 0)] + sorted_y[np.where(safe, high, 0)])
+            luminance[:, t] = np.where(safe, med, np.nan)
+
+    bits = np.zeros((n_facets, n_frames), np.uint8)
+    bits |= np.where(~bundle.sun_up, 1, 0).astype(np.uint8)[None, :]
+    bits |= (n_nonfinite > 0).astype(np.uint8) << 1
+    bits |= (n_saturated > 0).astype(np.uint8) << 2
+    bits |= (n_pixels < min_pixels).astype(np.uint8)[:, None] << 3
+    if bundle.pixel_encoding == "linear-radiance":
+        unit = "cd m-2"
+    elif bundle.pixel_encoding == "unknown":
+        unit = "code value"
+    else:
+        unit = "relative"
+    return FacetCurves(
+        ids=ids.copy(),
+        times=bundle.times,
+        luminance=luminance,
+        unit=unit,
+        n_pixels=n_pixels,
+        n_nonfinite=n_nonfinite,
+        n_saturated=n_saturated,
+        flag_bits=bits,
+        statistic=statistic,
+        min_pixels=int(min_pixels),
+        pixel_encoding=bundle.pixel_encoding,
+        response_known=bundle.response_known,
+        solar_zenith=bundle.solar_zenith,
+        solar_azimuth=bundle.solar_azimuth,
+        sun_direction=bundle.sun_direction,
+    )
+
+
+# ---------------------------------------------------------------------------
+# writing bundles
+# ---------------------------------------------------------------------------
+
+
+def _iso_time(value: Any, index: int) -> str:
+    try:
+        stamp = pd.Timestamp(value)
+    except (ValueError, TypeError):
+        raise ValueError(f"times[{index}]: not a time: {value!r}") from None
+    if stamp is pd.NaT or stamp.tzinfo is None:
+        raise ValueError(f"times[{index}]: time {value!r} has no UTC offset")
+    return stamp.isoformat()
+
+
+def _site_dict(site: Any) -> dict:
+    if isinstance(site, Mapping):
+        return {k: float(v) for k, v in site.items()}
+    values = [float(v) for v in site]
+    if len(values) not in (2, 3):
+        raise ValueError(f"site must be (latitude, longitude[, elevation]), got {site!r}")
+    return dict(zip(("latitude", "longitude", "elevation"), values, strict=False))
+
+
+def _frame_file(frame: Any, path: Path, frame_format: str) -> None:
+    """Write one frame array (or copy a frame file) to ``path``."""
+    if isinstance(frame, str | os.PathLike):
+        shutil.copyfile(frame, path)
+        return
+    arr = np.asarray(frame)
+    if frame_format == "hdr":
+        write_hdr(path, arr)
+    elif frame_format == "exr":
+        write_exr(path, arr.astype(np.float32))
+    elif frame_format == "tiff":
+        write_tiff(path, arr.astype(np.float32))
+    else:
+        dtype = np.uint8 if frame_format == "png8" else np.uint16
+        if arr.dtype.kind == "f":  # normalised code values in [0, 1]
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{frame_format} frames cannot hold NaN or infinite values")
+            arr = np.rint(np.clip(arr, 0.0, 1.0) * np.iinfo(dtype).max)
+        elif arr.dtype.kind in "ui" and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
+            raise ValueError(f"{frame_format} frame codes must lie in 0-{np.iinfo(dtype).max}")
+        arr = arr.astype(dtype)
+        if frame_format == "tiff16":
+            write_tiff(path, arr)
+        else:
+            write_png(path, arr)
+
+
+def write_bundle(
+    path: str | os.PathLike,
+    *,
+    site: Mapping | Sequence[float],
+    camera_position: Sequence[float],
+    pixel_encoding: str,
+    frames: Sequence[np.ndarray | str | os.PathLike],
+    times: Sequence[Any],
+    facets: Facets,
+    labels: np.ndarray,
+    ground_reflectance: float | None = None,
+    truth: Mapping | None = None,
+    frame_format: str = "hdr",
+    extra: Mapping | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """Write a sequence bundle folder (``bayesgloss-sequence/1``).
+
+    Everything is written to a hidden temporary folder beside ``path`` and
+    renamed into place at the end, so an interrupted write never leaves a
+    folder at ``path`` that looks like a complete bundle.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The bundle folder to create. -
+    site : mapping or sequence
+        ``{"latitude", "longitude", "elevation"}`` or (latitude, longitude[,
+        elevation]): deg north, deg EAST, m.
+    camera_position : sequence of 3 float
+        World position of the camera, m.
+    pixel_encoding : str
+        ``camera.pixel_encoding`` of the frames as given (see
+        :data:`PIXEL_ENCODINGS`); frames are written as given, no curve is
+        applied. -
+    frames : sequence of arrays (H, W, 3) or of image paths
+        Arrays are written in ``frame_format``; paths are copied as they are.
+        For ``png8``/``png16``/``tiff16`` a float array holds normalised code
+        values in [0, 1] (rounded to the nearest code) and an integer array
+        the codes themselves. -
+    times : sequence of tz-aware times
+        One per frame: pandas Timestamps, datetimes or ISO strings with a UTC
+        offset; written in ISO 8601 with their offset. -
+    facets : Facets
+        Ids (1-65535), unit normals and centres (m) of the facets.
+    labels : ndarray (H, W) of int
+        Facet id of each pixel, 0 for background; written as ``facets.png``,
+        8-bit when every id is below 256, else 16-bit. -
+    ground_reflectance : float, optional
+        Albedo of the ground, -.
+    truth : mapping, optional
+        What made the bundle (material, specularity, ...). -
+    frame_format : {"hdr", "png16", "png8", "tiff", "tiff16", "exr"}
+        File format of array frames: Radiance RGBE, PNG, float32 or 16-bit
+        TIFF, OpenEXR (float32). -
+    extra : mapping, optional
+        More top-level manifest fields (readers ignore what they do not know). -
+    overwrite : bool, default False
+        Replace an existing folder at ``path``. -
+
+    Returns
+    -------
+    Path
+        The bundle folder.
+
+    Raises
+    ------
+    ValueError
+        For inputs that would make a bad bundle (the message names the
+        manifest field), or an unknown ``frame_format``.
+    FileExistsError
+        When ``path`` exists and ``overwrite`` is False.
+    """
+    root = Path(path)
+    if frame_format not in FRAME_FORMATS:
+        raise ValueError(
+            f"unknown frame_format {frame_format!r}; valid: {', '.join(FRAME_FORMATS)}"
+        )
+    if root.exists() and not overwrite:
+        raise FileExistsError(f"bundle folder '{root}' exists (pass overwrite=True)")
+    frames = list(frames)
+    times = list(times)
+    if len(frames) != len(times):
+        raise ValueError(f"got {len(frames)} frames but {len(times)} times")
+    label_arr = np.asarray(labels)
+    if label_arr.ndim != 2 or label_arr.dtype.kind not in "ui":
+        raise ValueError(
+            f"labels must be a 2-D integer array, got {label_arr.dtype} {label_arr.shape}"
+        )
+    if label_arr.size and (label_arr.min() < 0 or label_arr.max() > 65535):
+        raise ValueError("labels must lie in 0-65535")
+    ids = np.asarray(facets.ids)
+    unknown = np.setdiff1d(np.unique(label_arr), np.concatenate([[0], ids]))
+    if len(unknown):
+        raise ValueError(f"labels hold ids that no facet has: {unknown[:5].tolist()}")
+
+    names = []
+    for i, frame in enumerate(frames):
+        if isinstance(frame, str | os.PathLike):
+            names.append(f"frames/f{i:03d}{Path(frame).suffix.lower()}")
+        else:
+            shape = np.shape(frame)
+            if shape[:2] != label_arr.shape:
+                raise ValueError(f"frames[{i}] has shape {shape}, the labels {label_arr.shape}")
+            names.append(f"frames/f{i:03d}{FRAME_FORMATS[frame_format]}")
+    manifest = {
+        "format": FORMAT,
+        "site": _site_dict(site),
+        "camera": {
+            "position": [float(v) for v in camera_position],
+            "pixel_encoding": pixel_encoding,
+        },
+    }
+    if ground_reflectance is not None:
+        manifest["ground_reflectance"] = float(ground_reflectance)
+    manifest["frames"] = [
+        {"file": name, "time": _iso_time(t, i)}
+        for i, (name, t) in enumerate(zip(names, times, strict=True))
+    ]
+    manifest["facets"] = [
+        {
+            "id": int(fid),
+            "normal": np.asarray(n, float).tolist(),
+            "center": np.asarray(c, float).tolist(),
+        }
+        for fid, n, c in zip(ids, facets.normal, facets.center, strict=True)
+    ]
+    if truth is not None:
+        manifest["truth"] = dict(truth)
+    for key, value in (extra or {}).items():
+        manifest.setdefault(key, value)
+    _parse_manifest(json.loads(json.dumps(manifest)), root)  # same checks as the reader
+    held = np.isin(ids, label_arr)
+    if not np.all(held):
+        raise BundleError(
+            root,
+            f"facets[{int(np.argmin(held))}].id",
+            f"facet id {ids[~held][0]} has no pixel in labels",
+        )
+
+    root.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.partial-", dir=root.parent))
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private
+    try:
+        (tmp / "frames").mkdir()
+        for frame, name in zip(frames, names, strict=True):
+            _frame_file(frame, tmp / name, frame_format)
+        write_png(tmp / LABELS, label_arr.astype(np.uint8 if ids.max() < 256 else np.uint16))
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+        if root.exists():  # overwrite: move the old bundle aside, then swap
+            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old-", dir=root.parent))
+            os.replace(root, old / root.name)
+            os.replace(tmp, root)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, root)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return root
