@@ -275,13 +275,17 @@ def _decode_rle_scanline(data: bytes, pos: int, planes: bytearray, base: int, le
             pos += 1
             if count > 128:  # a run of (count - 128) copies of the next byte
                 count -= 128
-                if x + count > stop or pos >= size:
+                if pos >= size:
+                    raise ValueError(f"pixel data end early, in scanline {y}")
+                if x + count > stop:
                     raise ValueError(f"run overruns scanline {y}")
                 planes[x : x + count] = data[pos : pos + 1] * count
                 pos += 1
             else:  # count literal bytes
-                if count == 0 or x + count > stop or pos + count > size:
+                if count == 0 or x + count > stop:
                     raise ValueError(f"bad literal count in scanline {y}")
+                if pos + count > size:
+                    raise ValueError(f"pixel data end early, in scanline {y}")
                 planes[x : x + count] = data[pos : pos + count]
                 pos += count
             x += count
@@ -507,13 +511,14 @@ def read_png(path: str | os.PathLike) -> tuple[np.ndarray, int]:
     """
     import png
 
-    width, height, rows, info = png.Reader(filename=os.fspath(path)).asDirect()
-    depth = info["bitdepth"]
-    dtype = np.uint16 if depth > 8 else np.uint8
-    planes = info["planes"]
-    pixels = np.empty((height, width * planes), dtype)
-    for y, row in enumerate(rows):
-        pixels[y] = row
+    with open(path, "rb") as f:
+        width, height, rows, info = png.Reader(file=f).asDirect()
+        depth = info["bitdepth"]
+        dtype = np.uint16 if depth > 8 else np.uint8
+        planes = info["planes"]
+        pixels = np.empty((height, width * planes), dtype)
+        for y, row in enumerate(rows):
+            pixels[y] = row
     pixels = pixels.reshape(height, width, planes)
     return (pixels[..., 0] if planes == 1 else pixels), (1 << depth) - 1
 
