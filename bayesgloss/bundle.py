@@ -102,6 +102,7 @@ __all__ = [
     "read_exr",
     "read_hdr",
     "read_image",
+    "read_labels",
     "read_png",
     "read_tiff",
     "srgb_to_linear",
@@ -191,6 +192,16 @@ class _HdrHeader(NamedTuple):
     data_start: int
 
 
+def _header_numbers(line: str, value: str, count: int) -> list[float]:
+    try:
+        numbers = [float(v) for v in value.split()[:count]]
+    except ValueError:
+        numbers = []
+    if len(numbers) != count or not all(math.isfinite(v) and v > 0 for v in numbers):
+        raise ValueError(f"bad header line {line!r}")
+    return numbers
+
+
 def _parse_hdr_header(data: bytes) -> _HdrHeader:
     """Header, resolution string and pixel-data offset of a Radiance picture."""
     if not data.startswith(b"#?"):
@@ -203,34 +214,27 @@ def _parse_hdr_header(data: bytes) -> _HdrHeader:
         line = raw.decode("latin-1").strip()
         key, _, value = line.partition("=")
         key = key.strip()
-        try:
-            if key == "FORMAT" and value.strip() != _HDR_FORMAT:
-                raise ValueError(f"unsupported FORMAT={value.strip()} (need {_HDR_FORMAT})")
-            if key == "EXPOSURE":
-                exposure *= float(value)  # cumulative: divide the pixels by the product
-            elif key == "COLORCORR":
-                colorcorr = colorcorr * np.array([float(v) for v in value.split()[:3]])
-        except ValueError as err:
-            if "FORMAT" in str(err):
-                raise
-            raise ValueError(f"bad header line {line!r}") from None
-    if not (exposure > 0 and np.isfinite(exposure)) or not np.all(colorcorr > 0):
-        raise ValueError(f"bad EXPOSURE {exposure} or COLORCORR {colorcorr}")
+        if key == "FORMAT" and value.strip() != _HDR_FORMAT:
+            raise ValueError(f"unsupported FORMAT={value.strip()} (need {_HDR_FORMAT})")
+        # EXPOSURE and COLORCORR are cumulative multipliers the pixels carry
+        if key == "EXPOSURE":
+            exposure *= _header_numbers(line, value, 1)[0]
+        elif key == "COLORCORR":
+            colorcorr = colorcorr * np.array(_header_numbers(line, value, 3))
     start = end + 2
     stop = data.find(b"\n", start)
     if stop < 0:
         raise ValueError("missing resolution string")
     tokens = data[start:stop].decode("latin-1").split()
-    try:
-        if len(tokens) != 4 or {tokens[0][1], tokens[2][1]} != {"X", "Y"}:
-            raise ValueError
-        if tokens[0][0] not in "+-" or tokens[2][0] not in "+-" or len(tokens[0]) != 2:
-            raise ValueError
-        shape = (int(tokens[1]), int(tokens[3]))
-    except (ValueError, IndexError):
-        raise ValueError(f"bad resolution string {' '.join(tokens)!r}") from None
-    if min(shape) < 1:
+    axes = tokens[0::2]
+    if (
+        len(tokens) != 4
+        or sorted(a[1:] for a in axes) != ["X", "Y"]
+        or any(a[:1] not in ("+", "-") for a in axes)
+        or not all(t.isdigit() and int(t) > 0 for t in tokens[1::2])
+    ):
         raise ValueError(f"bad resolution string {' '.join(tokens)!r}")
+    shape = (int(tokens[1]), int(tokens[3]))
     return _HdrHeader(shape, (tokens[0], tokens[2]), exposure, colorcorr, stop + 1)
 
 
@@ -497,8 +501,28 @@ def _kind(path: Path) -> str:
     )
 
 
+def _read_png(path, direct: bool) -> tuple[np.ndarray, int, dict]:
+    import png
+
+    with open(path, "rb") as f:
+        reader = png.Reader(file=f)
+        width, height, rows, info = reader.asDirect() if direct else reader.read()
+        depth = info["bitdepth"]
+        planes = info["planes"]
+        pixels = np.empty((height, width * planes), np.uint16 if depth > 8 else np.uint8)
+        for y, row in enumerate(rows):
+            pixels[y] = row
+    pixels = pixels.reshape(height, width, planes)
+    return (pixels[..., 0] if planes == 1 else pixels), (1 << depth) - 1, info
+
+
 def read_png(path: str | os.PathLike) -> tuple[np.ndarray, int]:
     """Read a PNG keeping every bit (pypng; 16-bit RGB keeps its low byte).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The PNG file. -
 
     Returns
     -------
@@ -509,18 +533,33 @@ def read_png(path: str | os.PathLike) -> tuple[np.ndarray, int]:
         The top code, ``2**bitdepth - 1`` (255, 65535, or 1-15 for low
         bit depths).
     """
-    import png
+    pixels, max_code, _ = _read_png(path, direct=True)
+    return pixels, max_code
 
-    with open(path, "rb") as f:
-        width, height, rows, info = png.Reader(file=f).asDirect()
-        depth = info["bitdepth"]
-        dtype = np.uint16 if depth > 8 else np.uint8
-        planes = info["planes"]
-        pixels = np.empty((height, width * planes), dtype)
-        for y, row in enumerate(rows):
-            pixels[y] = row
-    pixels = pixels.reshape(height, width, planes)
-    return (pixels[..., 0] if planes == 1 else pixels), (1 << depth) - 1
+
+def read_labels(path: str | os.PathLike) -> np.ndarray:
+    """A facet label image: a grey PNG's values exactly as stored (no sBIT scaling).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The PNG file (``facets.png``). -
+
+    Returns
+    -------
+    ndarray of uint8 or uint16, shape (H, W)
+        Facet id per pixel, 0 for background.
+
+    Raises
+    ------
+    ValueError
+        For a PNG that is not grey without alpha (palette, RGB, grey + alpha).
+    """
+    pixels, _, info = _read_png(path, direct=False)
+    if not info["greyscale"] or info["alpha"] or info.get("palette"):
+        kind = "palette" if info.get("palette") else "colour" if not info["greyscale"] else "alpha"
+        raise ValueError(f"a label image must be a grey PNG without alpha, got a {kind} PNG")
+    return pixels
 
 
 def write_png(path: str | os.PathLike, pixels: np.ndarray) -> None:
@@ -1109,6 +1148,8 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         the bundle, the field and the problem.
     """
     root = Path(path)
+    if root.name == MANIFEST and root.is_file():  # the manifest's path names its bundle
+        root = root.parent
     check = _Checker(path)
     manifest_path = root / MANIFEST
     if not root.is_dir():
@@ -1132,11 +1173,9 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
     try:
         if _kind(labels_path) != "png":
             raise ValueError("not a PNG file")
-        labels, _ = read_png(labels_path)
+        labels = read_labels(labels_path)
     except Exception as err:
         raise check.fail(LABELS, f"cannot read the label image: {err}") from None
-    if labels.ndim != 2 or labels.dtype.kind != "u":
-        raise check.fail(LABELS, f"must be a grey 8- or 16-bit PNG, got shape {labels.shape}")
     counts = np.bincount(labels.ravel())
     ids = parsed.facets.ids
     held = counts[np.minimum(ids, len(counts) - 1)] * (ids < len(counts))
@@ -1160,7 +1199,6 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
 
     # frames: presence, size and sample type from the headers
     files = []
-    integer_frames = False
     for i, name in enumerate(parsed.frame_files):
         file = root / name
         where = f"frames[{i}].file"
@@ -1180,8 +1218,15 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
                     else f"{LABELS} is {_size(labels.shape)}"
                 ),
             )
-        integer_frames |= info.dtype.kind in "ui"
-        if info.dtype.kind in "ui" and parsed.pixel_encoding == "linear-radiance":
+        if info.channels not in (1, 2, 3, 4):
+            raise check.fail(where, f"frame '{name}' has {info.channels} channels, not 1-4")
+        if info.dtype not in (np.uint8, np.uint16) and info.dtype.kind != "f":
+            raise check.fail(
+                where,
+                f"frame '{name}' has samples of type {info.dtype}; "
+                "need 8/16-bit unsigned integers or floats",
+            )
+        if info.dtype.kind == "u" and parsed.pixel_encoding == "linear-radiance":
             raise check.fail(
                 where,
                 f"frame '{name}' holds {8 * info.dtype.itemsize}-bit integer codes, which "
@@ -1629,7 +1674,8 @@ def write_bundle(
         for frame, name in zip(frames, names, strict=True):
             _frame_file(frame, tmp / name, frame_format)
         write_png(tmp / LABELS, label_arr.astype(np.uint8 if ids.max() < 256 else np.uint16))
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+        text = json.dumps(manifest, indent=2, allow_nan=False)
+        (tmp / MANIFEST).write_text(text + "\n", encoding="utf-8")
         if root.exists():  # overwrite: move the old bundle aside, then swap
             old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old-", dir=root.parent))
             os.replace(root, old / root.name)

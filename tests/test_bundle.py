@@ -678,6 +678,14 @@ def _integer_frames(path):
     bd.write_png(path / "frames" / "f001.tif", np.ones((24, 30, 3), np.uint16))
 
 
+def _int16_frame(path):
+    import tifffile
+
+    tifffile.imwrite(
+        path / "frames" / "f000.tif", np.ones((24, 30, 3), np.int16), photometric="rgb"
+    )
+
+
 _NO_OFFSET = "1996-06-21T05:00:00"
 
 BAD_BUNDLES = {
@@ -790,7 +798,8 @@ BAD_BUNDLES = {
         "facets[4].center",
         "missing required field",
     ),
-    "label image not grey": (_rgb_labels, "facets.png", "must be a grey 8- or 16-bit PNG"),
+    "label image not grey": (_rgb_labels, "facets.png", "must be a grey PNG without alpha"),
+    "frame sample type": (_int16_frame, "frames[0].file", "samples of type int16"),
     "label image size": (_smaller_labels, "frames[0].file", "but facets.png is 30x23 pixels"),
     "truth not an object": (_set(["truth"], "plastic"), "truth", "must be an object"),
 }
@@ -833,6 +842,11 @@ def test_corrupt_frame_data_rejected_when_read(tmp_path):
 def test_missing_bundle_folder(tmp_path):
     with pytest.raises(bd.BundleError, match="no bundle folder"):
         bd.read_bundle(tmp_path / "nowhere")
+
+
+def test_manifest_path_names_its_bundle(tmp_path):
+    path, _ = _write(tmp_path)
+    assert bd.read_bundle(path / bd.MANIFEST).path == path
 
 
 def test_unlisted_labels_warn_and_are_ignored(tmp_path):
