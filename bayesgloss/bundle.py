@@ -1443,11 +1443,15 @@ def facet_curves(
             med = 0.5 * (sorted_y[np.where(safe, low, 0)] + sorted_y[np.where(safe, high, 0)])
             luminance[:, t] = np.where(safe, med, np.nan)
 
+    reasons = {
+        "sun-below-horizon": ~bundle.sun_up[None, :],
+        "nan-pixels": n_nonfinite > 0,
+        "saturated": n_saturated > 0,
+        "too-few-pixels": (n_pixels < min_pixels)[:, None],
+    }
     bits = np.zeros((n_facets, n_frames), np.uint8)
-    bits |= np.where(~bundle.sun_up, 1, 0).astype(np.uint8)[None, :]
-    bits |= (n_nonfinite > 0).astype(np.uint8) << 1
-    bits |= (n_saturated > 0).astype(np.uint8) << 2
-    bits |= (n_pixels < min_pixels).astype(np.uint8)[:, None] << 3
+    for k, reason in enumerate(FLAG_REASONS):  # bit k: FLAG_REASONS[k]
+        bits |= np.broadcast_to(reasons[reason], bits.shape).astype(np.uint8) << k
     if bundle.pixel_encoding == "linear-radiance":
         unit = "cd m-2"
     elif bundle.pixel_encoding == "unknown":

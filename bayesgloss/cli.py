@@ -80,6 +80,8 @@ def _format_curves(curves, bundle_path) -> str:
     """Facet curves as a fixed-width table, one row per facet, '-' for invalid entries."""
     import numpy as np
 
+    from .bundle import FLAG_REASONS
+
     n_facets, n_frames = curves.luminance.shape
     width = 9
     lines = [
@@ -99,8 +101,7 @@ def _format_curves(curves, bundle_path) -> str:
         ]
         lines.append(f"{curves.ids[f]:>6} {curves.n_pixels[f]:>7} " + " ".join(cells))
     counts = [
-        f"{reason} {int(np.count_nonzero(curves.flagged(reason)))}"
-        for reason in ("sun-below-horizon", "nan-pixels", "saturated", "too-few-pixels")
+        f"{reason} {int(np.count_nonzero(curves.flagged(reason)))}" for reason in FLAG_REASONS
     ]
     lines.append(
         f"left out ('-'): {np.count_nonzero(~valid)} of {valid.size}; " + ", ".join(counts)

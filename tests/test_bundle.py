@@ -1080,6 +1080,9 @@ def test_cli_curves_table_and_csv(tmp_path, capsys):
     reference = _reference_curves(frames, labels, facets.ids, scale=179)
     assert float(rows[0][2]) == pytest.approx(reference[0, 0], rel=1e-3)
 
+    assert cli.main(["curves", str(path), "--csv", "-"]) == 0
+    assert capsys.readouterr().out.startswith("id,frame,time,luminance,valid,flag")
+
     csv = tmp_path / "curves.csv"
     assert cli.main(["curves", str(path), "--csv", str(csv), "--statistic", "median"]) == 0
     table = pd.read_csv(csv, keep_default_na=False)
