@@ -130,6 +130,72 @@ def _curves(args: argparse.Namespace) -> int:
     return 0
 
 
+def _render(args: argparse.Namespace) -> int:
+    import json
+
+    from . import sequences
+
+    configs = []
+    if args.paper:
+        configs += sequences.paper_configs(image_size=args.size)
+    for path in args.config or []:
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as err:
+            raise ValueError(f"config file '{path}': {err}") from None
+        items = data.get("sequences", [data]) if isinstance(data, dict) else data
+        if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+            raise ValueError(
+                f"config file '{path}': expected an object, a list of objects, or "
+                '{"sequences": [...]}'
+            )
+        for i, item in enumerate(items):
+            try:
+                configs.append(sequences.SequenceConfig.from_dict(item))
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"config file '{path}': sequence {i}: {err}") from None
+    if not configs:
+        raise ValueError("nothing to render: give --paper and/or --config FILE")
+    paths = sequences.render_bundles(configs, args.out, jobs=args.jobs, progress=not args.quiet)
+    for p in paths:
+        print(p)
+    return 0
+
+
+def _baseline(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from . import baseline, bundle, sun
+
+    b = bundle.read_bundle(args.bundle)
+    curves = bundle.facet_curves(b)
+    hours = sun.local_solar_time(b.times, b.site.longitude)
+    res = baseline.peak_frame_gloss(
+        curves.luminance,
+        curves.valid,
+        b.view_geometry(),
+        b.sun_direction,
+        ids=curves.ids,
+        exponent=args.exponent,
+        frame_hours=np.unwrap(hours, period=24),
+    )
+    if args.json:
+        print(json.dumps(res.to_json(), indent=2))
+        return 0
+    print(f"{args.bundle}: peak-frame baseline (Love & Efford), Phong n = {args.exponent:g}")
+    print(
+        f"object gloss (mean over {int(np.sum(res.direct_sun & np.isfinite(res.gloss)))} "
+        f"facets with direct sun): {res.object_gloss:.3f}"
+    )
+    print(f"{'facet':>6} {'gamma':>6}  {'peak frame':>10}  flags")
+    for i, g, pk, fl in zip(res.ids, res.gloss, res.observed_peak, res.flags, strict=True):
+        gs = "   -  " if not np.isfinite(g) else f"{g:6.3f}"
+        print(f"{int(i):>6} {gs}  {int(pk):>10}  {', '.join(fl)}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -148,6 +214,21 @@ def _parser() -> argparse.ArgumentParser:
         help="facets with fewer pixels are left out (default: 4)",
     )
     c.set_defaults(func=_curves)
+    r = sub.add_parser("render", help="render test sequences with Radiance into bundles")
+    r.add_argument("--paper", action="store_true", help="the paper's 60 sequences")
+    r.add_argument(
+        "--config", action="append", metavar="FILE", help="JSON sequence config(s) (repeatable)"
+    )
+    r.add_argument("--out", default="out/bundles", help="bundle cache folder")
+    r.add_argument("--size", type=int, default=128, help="image size for --paper [pixels]")
+    r.add_argument("--jobs", type=int, default=2, help="Radiance processes at once")
+    r.add_argument("--quiet", action="store_true", help="no progress line")
+    r.set_defaults(func=_render)
+    b = sub.add_parser("baseline", help="the paper's peak-frame gloss estimate of a bundle")
+    b.add_argument("bundle", help="sequence bundle folder")
+    b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--exponent", type=float, default=2.0, help="Phong exponent n (eq. 6)")
+    b.set_defaults(func=_baseline)
     return p
 
 

@@ -384,7 +384,7 @@ def render_bundles(configs, cache_dir, *, jobs: int = 2, progress: bool = True) 
         first = members[0]
         facets = first.facets()
         suns = first.sun_directions()
-        day = int(first.frame_times()[0].dayofyear)
+        day = int(first.frame_times()[0].day_of_year)
         rays = [np.concatenate(camera_rays(m, facets), axis=1) for m in members]
         plans[key] = dict(
             members=members,

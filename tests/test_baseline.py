@@ -20,6 +20,10 @@ def _geom(normals, cameras):
     return ViewGeometry(n, v)
 
 
+def seen_idx(res):
+    return np.flatnonzero(res.observed_peak >= 0)
+
+
 def test_recovers_the_generating_gloss_of_its_own_model():
     # data made by the paper's own model: the true gamma is among the gammas whose
     # predicted peak frame equals the observed one, and the estimate reproduces it
@@ -30,9 +34,15 @@ def test_recovers_the_generating_gloss_of_its_own_model():
     views = normals + 0.8 * rng.normal(size=(40, 3))  # cameras in front of each facet
     g = _geom(normals, views)
     truth = rng.uniform(0, 1, 40)
-    obs = render.paper_point_sun(g, sun_dir, truth[:, None], 20.0)
+    n = baseline.DEFAULT_EXPONENT
+    obs = render.paper_point_sun(g, sun_dir, truth[:, None], n)
     valid = np.broadcast_to(sun_dir[:, 2] > 0, obs.shape)
     res = baseline.peak_frame_gloss(obs, valid, g, sun_dir)
+    # the plateau reported holds the truth
+    assert np.all(
+        (res.interval[seen_idx(res), 0] <= truth[seen_idx(res)] + 0.005)
+        & (truth[seen_idx(res)] <= res.interval[seen_idx(res), 1] + 0.005)
+    )
     seen = res.observed_peak >= 0
     assert seen.sum() >= 30
     idx = np.round(truth * 100).astype(int)
@@ -54,7 +64,7 @@ def test_mirror_degenerate_geometry_is_flagged():
     from_south = [0.0, -np.cos(low), np.sin(low)]
     g = _geom([[0, 0, 1], [0, 0, 1]], [from_north, from_south])
     obs = render.paper_point_sun(g, sun_dir, 0.0, 20.0)
-    res = baseline.peak_frame_gloss(obs, obs > 0, g, sun_dir)
+    res = baseline.peak_frame_gloss(obs, obs > 0, g, sun_dir, exponent=20.0)
     assert "mirror-degenerate" in res.flags[0]
     assert "mirror-degenerate" not in res.flags[1]
     assert res.predicted_peak[0, 0] == 8  # noon is frame 8 (04:00 + 8 h)
