@@ -281,16 +281,28 @@ def sample_posterior(
     data: lk.CurveData,
     *,
     n_ensembles: int = 4,
-    n_walkers: int = 12,
+    n_walkers: int | None = None,
     burn: int = 300,
-    chunk: int = 200,
+    chunk: int = 100,
     min_tau_multiple: float = 50.0,
-    max_steps: int = 6000,
+    max_steps: int = 8000,
     draws_per_ensemble: int = 250,
     moves=DEFAULT_MOVES,
-    rng=None,
+    seed: int | None = 0,
+    jobs: int = 1,
+    stream_size: int = 512,
+    slots: int = 160,
+    progress=None,
 ) -> PosteriorSamples:
     """Sample every facet's posterior with the batched ensemble sampler.
+
+    Facets are dealt, in order, into streams of at most ``stream_size``;
+    stream i draws its random numbers from ``SeedSequence(seed).spawn(n)[i]``
+    and runs its facets through ``slots`` vectorised places: a facet that has
+    converged leaves its place to the next one waiting, so the batch stays
+    full and slow facets do not run alone. Results depend on the seed,
+    ``stream_size`` and ``slots``, never on ``jobs``, which only spreads the
+    streams over processes.
 
     Parameters
     ----------
@@ -298,74 +310,148 @@ def sample_posterior(
         F facets.
     n_ensembles : int
         Independent ensembles per facet (R-hat needs several).
-    n_walkers : int
-        Walkers per ensemble (even, >= 2 P).
+    n_walkers : int, optional
+        Walkers per ensemble (even, >= 2 P); default 2 P.
     burn : int
-        Steps discarded after the start.
+        Steps discarded after the start (rounded up to whole chunks).
     chunk : int
-        Production steps between convergence checks.
+        Steps between convergence checks.
     min_tau_multiple : float
         Run at least this many integrated autocorrelation times.
     max_steps : int
-        Production steps at most (facets that need more are returned as run;
-        the caller's diagnostics flag them).
+        Production steps at most (facets that need more are returned as run
+        and the diagnostics flag them).
     draws_per_ensemble : int
-        Draws kept per ensemble (thinned evenly).
-    rng : numpy.random.Generator or int
+        Draws kept per ensemble (thinned evenly over the production run).
+    moves : sequence of (name, weight)
+    seed : int or None
+    jobs : int
+        Worker processes.
+    stream_size, slots : int
+        Facets per stream, and facets sampled at once within a stream.
+    progress : callable, optional
+        Called with (facets done, facets in all) as streams finish.
     """
-    rng = np.random.default_rng(rng)
     t0 = time.perf_counter()
     n_f = len(data.y)
-    e = n_ensembles
-    rep = np.repeat(np.arange(n_f), e)  # problem b -> facet
-    batch = data.take(rep)
-
-    def logp_for(sub):
-        return lambda th: lk.log_probability(th, sub)
-
-    coords = initial_ensemble(batch, n_walkers, rng)
-    sampler = BatchedEnsemble(logp_for(batch), moves, rng)
-    chain, lps, _ = sampler.run(coords, burn)
-    coords, logp = chain[-1].copy(), lps[-1].copy()
-
     p = data.n_params
-    b = len(rep)
-    active = np.arange(b)
-    kept: list[list[np.ndarray]] = [[] for _ in range(b)]
-    steps = np.zeros(b, dtype=int)
-    acc_sum = np.zeros(b)
-    tau = np.full((b, p), np.nan)
-    while len(active):
-        sub = batch.take(active)
-        sampler.log_prob = logp_for(sub)
-        ch, lp_ch, acc = sampler.run(coords[active], chunk, logp[active])
-        coords[active], logp[active] = ch[-1], lp_ch[-1]
-        for k, bi in enumerate(active):
-            kept[bi].append(ch[:, k])
-        steps[active] += chunk
-        acc_sum[active] += acc * chunk
-        # convergence per facet: all its ensembles past min_tau_multiple tau
-        full = np.stack([np.concatenate(kept[bi]) for bi in active], axis=1)  # (N, A, W, P)
-        tau[active] = integrated_time(full)
-        fac = rep[active]
-        need = np.nan_to_num(tau[active], nan=np.inf).max(1) * min_tau_multiple
-        ok_b = steps[active] >= need
-        ok_f = {f for f in np.unique(fac) if np.all(ok_b[fac == f])}
-        done = np.array([rep[bi] in ok_f for bi in active]) | (steps[active] >= max_steps)
-        active = active[~done]
-
-    n_keep = draws_per_ensemble
-    out = np.empty((n_f, e, n_keep, p))
-    for bi in range(b):
-        ch = np.concatenate(kept[bi])  # (N, W, P)
-        flat = ch.reshape(-1, p)  # step-major, walkers interleaved
-        idx = np.linspace(0, len(flat) - 1, n_keep).round().astype(int)
-        out[rep[bi], bi % e] = flat[idx]
-    return PosteriorSamples(
-        out,
-        tau.reshape(n_f, e, p),
-        steps.reshape(n_f, e).max(1),
-        (acc_sum / np.maximum(steps, 1)).reshape(n_f, e),
-        time.perf_counter() - t0,
-        lk.PARAMETERS(data.camera),
+    walkers = 2 * p if n_walkers is None else int(n_walkers)
+    n_streams = max(1, -(-n_f // stream_size))
+    bounds = np.linspace(0, n_f, n_streams + 1).round().astype(int)
+    seeds = np.random.SeedSequence(seed).spawn(n_streams)
+    args = dict(
+        n_ensembles=n_ensembles,
+        n_walkers=walkers,
+        burn=burn,
+        chunk=chunk,
+        min_tau_multiple=min_tau_multiple,
+        max_steps=max_steps,
+        draws_per_ensemble=draws_per_ensemble,
+        moves=moves,
+        slots=slots,
     )
+    tasks = [
+        (i, data.take(np.arange(bounds[i], bounds[i + 1])), seeds[i]) for i in range(n_streams)
+    ]
+    parts = [None] * n_streams
+    done = 0
+    if jobs > 1 and n_streams > 1:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futs = {pool.submit(_sample_stream, d, sd, **args): i for i, d, sd in tasks}
+            for fut in as_completed(futs):
+                parts[futs[fut]] = fut.result()
+                done += len(parts[futs[fut]][0])
+                if progress:
+                    progress(done, n_f)
+    else:
+        for i, d, sd in tasks:
+            parts[i] = _sample_stream(d, sd, **args)
+            done += len(parts[i][0])
+            if progress:
+                progress(done, n_f)
+    draws, tau, steps, acc = (np.concatenate([pt[k] for pt in parts]) for k in range(4))
+    return PosteriorSamples(
+        draws, tau, steps, acc, time.perf_counter() - t0, lk.PARAMETERS(data.camera)
+    )
+
+
+def _sample_stream(
+    data,
+    seed_seq,
+    *,
+    n_ensembles,
+    n_walkers,
+    burn,
+    chunk,
+    min_tau_multiple,
+    max_steps,
+    draws_per_ensemble,
+    moves,
+    slots,
+):
+    """One stream of facets through ``slots`` places, E ensembles each (see above)."""
+    rng = np.random.default_rng(seed_seq)
+    n_f, e, p = len(data.y), n_ensembles, data.n_params
+    burn_chunks = -(-burn // chunk)
+    out = np.empty((n_f, e, draws_per_ensemble, p))
+    tau_out = np.full((n_f, e, p), np.nan)
+    steps_out = np.zeros(n_f, dtype=int)
+    acc_out = np.zeros((n_f, e))
+
+    waiting = list(range(n_f))
+    facets: list[int] = []  # facet of each place
+    coords = np.empty((0, n_walkers, p))
+    logp = np.empty((0, n_walkers))
+    age = np.empty(0, dtype=int)  # chunks run, per place
+    kept: dict[int, list[np.ndarray]] = {}
+    acc_sum = np.empty((0, e))
+    sampler = BatchedEnsemble(None, moves, rng)
+    while waiting or facets:
+        # fill free places with waiting facets
+        new = waiting[: max(0, slots - len(facets))]
+        waiting = waiting[len(new) :]
+        if new:
+            sub = data.take(np.repeat(new, e))
+            start = initial_ensemble(sub, n_walkers, rng)
+            facets += new
+            coords = np.concatenate([coords, start])
+            logp = np.concatenate([logp, lk.log_probability(start, sub)])
+            age = np.concatenate([age, np.zeros(len(new), dtype=int)])
+            acc_sum = np.concatenate([acc_sum, np.zeros((len(new), e))])
+            for f in new:
+                kept[f] = []
+        batch = data.take(np.repeat(facets, e))
+        sampler.log_prob = lambda th, batch=batch: lk.log_probability(th, batch)
+        ch, lp, acc = sampler.run(coords, chunk, logp)
+        coords, logp = ch[-1].copy(), lp[-1].copy()
+        age += 1
+        a = len(facets)
+        ch = ch.reshape(chunk, a, e, n_walkers, p)
+        acc = acc.reshape(a, e)
+        finished = np.zeros(a, dtype=bool)
+        for k, f in enumerate(facets):
+            if age[k] <= burn_chunks:
+                continue
+            kept[f].append(ch[:, k])
+            acc_sum[k] += acc[k]
+            run = np.concatenate(kept[f])  # (N, E, W, P)
+            t = integrated_time(run)  # ensembles as problems: (E, P)
+            n_steps = len(run)
+            need = np.nan_to_num(t, nan=np.inf).max() * min_tau_multiple
+            if n_steps >= need or n_steps >= max_steps:
+                flat = run.transpose(1, 0, 2, 3).reshape(e, -1, p)
+                idx = np.linspace(0, flat.shape[1] - 1, draws_per_ensemble).round().astype(int)
+                out[f] = flat[:, idx]
+                tau_out[f], steps_out[f] = t, n_steps
+                acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
+                del kept[f]
+                finished[k] = True
+        if np.any(finished):
+            keep_places = ~finished
+            facets = [f for f, k in zip(facets, keep_places, strict=True) if k]
+            rows = np.repeat(keep_places, e)
+            coords, logp = coords[rows], logp[rows]
+            age, acc_sum = age[keep_places], acc_sum[keep_places]
+    return out, tau_out, steps_out, acc_out
