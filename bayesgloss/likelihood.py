@@ -136,6 +136,30 @@ class CurveData:
         nxt = np.concatenate([g[:, 1:], g[:, -1:]], axis=1)
         return np.ascontiguousarray(np.stack([g, nxt - g], axis=2).reshape(-1, 2, g.shape[-1]))
 
+    # float32 tables of the fast default likelihood (_fast_relative)
+    @functools.cached_property
+    def fast_pairs(self) -> np.ndarray:
+        """Rows (G_j - D, G_j+1 - G_j) in float32, (B*N, 2, T)."""
+        pairs = self.glossy_pairs.reshape(len(self.y), -1, 2, self.y.shape[1]).copy()
+        pairs[:, :, 0] -= self.diffuse[:, None, :]
+        return pairs.reshape(-1, 2, self.y.shape[1]).astype(np.float32)
+
+    @functools.cached_property
+    def fast_diffuse(self) -> np.ndarray:
+        return self.diffuse.astype(np.float32)
+
+    @functools.cached_property
+    def fast_y(self) -> np.ndarray:
+        return self.y.astype(np.float32)
+
+    @functools.cached_property
+    def fast_valid(self) -> np.ndarray:
+        return self.valid.astype(np.float32)
+
+    @functools.cached_property
+    def fast_floor(self) -> np.ndarray:
+        return np.maximum(FLOOR_FRACTION * self.diffuse_peak, 1e-30).astype(np.float32)
+
     def take(self, index) -> CurveData:
         """The data of a subset (or repetition) of facets."""
         idx = np.asarray(index)
@@ -266,9 +290,52 @@ def predict(theta, data: CurveData) -> np.ndarray:
     return mu
 
 
+def _fast_relative(th, data: CurveData) -> np.ndarray:
+    """Summed log likelihood for the default model (linear camera, relative
+    noise, nothing censored), in float32 with the scale factored out:
+    z = (y / s - m') / (m' + f') / sigma, log sd = log s + log(m' + f') + log sigma,
+    m' the prediction at unit scale, f' = FLOOR_FRACTION max_t D_ft."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return _fast_relative_core(th, data)
+
+
+def _fast_relative_core(th, data: CurveData) -> np.ndarray:
+    b, k = th.shape[:2]
+    f32 = np.float32
+    grid = data.log_n_grid
+    n = len(grid)
+    pos = np.clip((th[..., 1] - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
+    j = pos.astype(np.intp)
+    w = (pos - j).astype(f32)[..., None]
+    rows = data.fast_pairs[(np.arange(b)[:, None] * n + j).ravel()].reshape(b, k, 2, -1)
+    m = rows[:, :, 1] * w
+    m += rows[:, :, 0]  # G(n) - D
+    m *= th[..., 0:1].astype(f32)
+    m += data.fast_diffuse[:, None, :]  # m' = D + gamma (G - D)
+    r = data.fast_y[:, None, :] * np.exp(-th[..., 2:3]).astype(f32)
+    r -= m
+    m += data.fast_floor[:, None, None]  # m' + f'
+    r /= m
+    r *= r
+    np.log(m, out=m)
+    r *= np.exp(-2.0 * th[..., 3:4]).astype(f32) * f32(0.5)
+    r += m
+    r *= data.fast_valid[:, None, :]
+    total = r.sum(axis=-1, dtype=np.float64)
+    n_valid = data.valid.sum(axis=1)[:, None]
+    return -total - n_valid * (th[..., 2] + th[..., 3] + 0.5 * np.log(2 * np.pi))
+
+
 def log_likelihood(theta, data: CurveData, pointwise: bool = False) -> np.ndarray:
     """Log likelihood of the valid frames, (B, K) or pointwise (B, K, T)."""
     th = np.asarray(theta, dtype=float)
+    if (
+        not pointwise
+        and data.camera == "linear"
+        and data.noise == "relative"
+        and not data.any_censored
+    ):
+        return _fast_relative(th, data)
     m = predict(th, data)
     valid = data.valid[:, None, :]
     log_sigma = th[..., 3:4]

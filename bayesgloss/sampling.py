@@ -83,41 +83,40 @@ class BatchedEnsemble:
         b, h, p = s.shape
         nc = c.shape[1]
         rng = self.rng
+        rows = np.arange(b)[:, None]
         if move == "stretch":
             z = ((self.a - 1.0) * rng.random((b, h)) + 1.0) ** 2 / self.a
-            j = rng.integers(0, nc, (b, h))
-            cj = np.take_along_axis(c, j[..., None], axis=1)
+            cj = c[rows, rng.integers(0, nc, (b, h))]
             return cj - (cj - s) * z[..., None], (p - 1.0) * np.log(z)
         g0 = 1.0 if move == "de-jump" else 2.38 / np.sqrt(2.0 * p)
         i = rng.integers(0, nc, (b, h))
         j = (i + rng.integers(1, nc, (b, h))) % nc  # distinct from i
-        diff = np.take_along_axis(c, i[..., None], axis=1) - np.take_along_axis(
-            c, j[..., None], axis=1
-        )
         gamma = g0 * (1.0 + 1e-5 * rng.standard_normal((b, h, 1)))
-        return s + gamma * diff, np.zeros((b, h))
+        return s + gamma * (c[rows, i] - c[rows, j]), np.zeros((b, h))
 
     def step(self, coords, log_p):
-        """One step (both halves) in place; returns the acceptance mask (B, W)."""
-        b, w, p = coords.shape
+        """One step (both halves) in place; returns the acceptance mask (B, W).
+
+        The random split into halves is shared by the B problems (it only
+        decides which walkers move first); every other random number is
+        drawn per problem and walker.
+        """
+        w = coords.shape[1]
         move = self.moves[self.rng.choice(len(self.moves), p=self.weights)]
-        # a random split into two halves, independently for every problem
-        order = np.argsort(self.rng.random((b, w)), axis=1)
-        halves = (order[:, : w // 2], order[:, w // 2 :])
-        accepted = np.zeros((b, w), dtype=bool)
+        order = self.rng.permutation(w)
+        halves = (order[: w // 2], order[w // 2 :])
+        accepted = np.zeros(log_p.shape, dtype=bool)
         for k in (0, 1):
             idx, cidx = halves[k], halves[1 - k]
-            s = np.take_along_axis(coords, idx[..., None], axis=1)
-            c = np.take_along_axis(coords, cidx[..., None], axis=1)
-            q, factor = self._propose(move, s, c)
+            s = coords[:, idx]
+            q, factor = self._propose(move, s, coords[:, cidx])
             lp_new = self.log_prob(q)
-            lp_old = np.take_along_axis(log_p, idx, axis=1)
+            lp_old = log_p[:, idx]
             with np.errstate(invalid="ignore"):
                 acc = np.log(self.rng.random(lp_new.shape)) < factor + lp_new - lp_old
-            new_s = np.where(acc[..., None], q, s)
-            np.put_along_axis(coords, idx[..., None], new_s, axis=1)
-            np.put_along_axis(log_p, idx, np.where(acc, lp_new, lp_old), axis=1)
-            np.put_along_axis(accepted, idx, acc, axis=1)
+            coords[:, idx] = np.where(acc[..., None], q, s)
+            log_p[:, idx] = np.where(acc, lp_new, lp_old)
+            accepted[:, idx] = acc
         return accepted
 
     def run(self, coords, n_steps: int, log_p=None):
@@ -286,7 +285,7 @@ def sample_posterior(
     chunk: int = 100,
     min_tau_multiple: float = 50.0,
     max_steps: int = 8000,
-    draws_per_ensemble: int = 250,
+    draws_per_ensemble: int = 1000,
     moves=DEFAULT_MOVES,
     seed: int | None = 0,
     jobs: int = 1,
@@ -322,7 +321,14 @@ def sample_posterior(
         Production steps at most (facets that need more are returned as run
         and the diagnostics flag them).
     draws_per_ensemble : int
-        Draws kept per ensemble (thinned evenly over the production run).
+        Draws kept per ensemble: every walker's trajectory thinned evenly.
+
+    Notes
+    -----
+    A facet stops when its production run is at least ``min_tau_multiple``
+    integrated autocorrelation times of every parameter in every ensemble
+    and ArviZ finds gamma converged across the ensembles (R-hat < 1.01, bulk
+    and tail ESS >= 400), or at ``max_steps``.
     moves : sequence of (name, weight)
     seed : int or None
     jobs : int
@@ -405,6 +411,8 @@ def _sample_stream(
     coords = np.empty((0, n_walkers, p))
     logp = np.empty((0, n_walkers))
     age = np.empty(0, dtype=int)  # chunks run, per place
+    next_check = np.empty(0)  # production steps at which to estimate tau next
+    thin = 2  # stored chains keep every 2nd step (tau >> 2 steps here)
     kept: dict[int, list[np.ndarray]] = {}
     acc_sum = np.empty((0, e))
     sampler = BatchedEnsemble(None, moves, rng)
@@ -419,6 +427,7 @@ def _sample_stream(
             coords = np.concatenate([coords, start])
             logp = np.concatenate([logp, lk.log_probability(start, sub)])
             age = np.concatenate([age, np.zeros(len(new), dtype=int)])
+            next_check = np.concatenate([next_check, np.full(len(new), 10.0 * chunk)])
             acc_sum = np.concatenate([acc_sum, np.zeros((len(new), e))])
             for f in new:
                 kept[f] = []
@@ -434,24 +443,51 @@ def _sample_stream(
         for k, f in enumerate(facets):
             if age[k] <= burn_chunks:
                 continue
-            kept[f].append(ch[:, k])
+            kept[f].append(ch[::thin, k].astype(np.float32))
             acc_sum[k] += acc[k]
-            run = np.concatenate(kept[f])  # (N, E, W, P)
-            t = integrated_time(run)  # ensembles as problems: (E, P)
-            n_steps = len(run)
+            n_steps = (age[k] - burn_chunks) * chunk
+            if n_steps < next_check[k] and n_steps < max_steps:
+                continue
+            run = np.concatenate(kept[f])  # (N / thin, E, W, P)
+            t = thin * integrated_time(run)  # ensembles as problems: (E, P) [steps]
             need = np.nan_to_num(t, nan=np.inf).max() * min_tau_multiple
-            if n_steps >= need or n_steps >= max_steps:
-                flat = run.transpose(1, 0, 2, 3).reshape(e, -1, p)
-                idx = np.linspace(0, flat.shape[1] - 1, draws_per_ensemble).round().astype(int)
-                out[f] = flat[:, idx]
+            draws = _ensemble_draws(run, draws_per_ensemble)  # (E, S, P)
+            if (n_steps >= need and _gamma_converged(draws[..., 0])) or n_steps >= max_steps:
+                out[f] = draws
                 tau_out[f], steps_out[f] = t, n_steps
                 acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
                 del kept[f]
                 finished[k] = True
+            else:  # check again when the estimate says it may be enough, or 25 % later
+                next_check[k] = max(need, 1.25 * n_steps)
         if np.any(finished):
             keep_places = ~finished
             facets = [f for f, k in zip(facets, keep_places, strict=True) if k]
             rows = np.repeat(keep_places, e)
             coords, logp = coords[rows], logp[rows]
             age, acc_sum = age[keep_places], acc_sum[keep_places]
+            next_check = next_check[keep_places]
     return out, tau_out, steps_out, acc_out
+
+
+def _ensemble_draws(run, n_draws: int) -> np.ndarray:
+    """Draws per ensemble, (E, S, P): each walker's trajectory thinned evenly,
+    walkers one after the other (so that every stretch of a chain is one
+    walker's Markov chain, as ArviZ's R-hat and ESS assume)."""
+    n, e, w, p = run.shape
+    per = max(1, n_draws // w)
+    idx = np.linspace(0, n - 1, per).round().astype(int)
+    return run[idx].transpose(1, 2, 0, 3).reshape(e, w * per, p).astype(float)
+
+
+def _gamma_converged(gamma) -> bool:
+    """ArviZ's rank-normalised R-hat < 1.01 and bulk and tail ESS >= 400 (E, S)."""
+    import arviz as az
+
+    if not np.all(np.isfinite(gamma)) or np.ptp(gamma) == 0:
+        return False
+    return bool(
+        az.rhat(gamma) < 1.01
+        and az.ess(gamma, method="bulk") >= 400
+        and az.ess(gamma, method="tail") >= 400
+    )
