@@ -196,6 +196,59 @@ def _baseline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _estimate(args: argparse.Namespace) -> int:
+    import json
+
+    from . import estimate
+
+    def progress(done, total):
+        if not args.quiet:
+            print(
+                f"\rbayesgloss estimate: {done}/{total} facets", end="", file=sys.stderr, flush=True
+            )
+
+    res = estimate.estimate_bundle(
+        args.bundle,
+        illumination=args.sky,
+        noise=args.noise,
+        camera=args.camera,
+        seed=args.seed,
+        jobs=args.jobs,
+        progress=progress,
+    )
+    if not args.quiet:
+        print(file=sys.stderr)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        res.idata.to_netcdf(str(out / "posterior.nc"))
+        (out / "summary.json").write_text(json.dumps(res.summary, indent=2))
+    if args.json:
+        print(json.dumps(res.summary, indent=2))
+        return 0
+    o = res.summary["object"]
+    g = o["gamma"]
+    print(
+        f"{args.bundle}: posterior gloss ({args.sky}, {res.summary['noise']} noise, "
+        f"{res.summary['camera']} camera)"
+    )
+    print(
+        f"object gamma {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}], "
+        f"{o['facets_converged']}/{o['facets']} facets converged"
+    )
+    print(f"{'facet':>6} {'gamma':>6} {'q05':>6} {'q95':>6}  flags")
+    for f in res.summary["facets"]:
+        if f["gamma"] is None:
+            print(f"{f['id']:>6}      -      -      -  {', '.join(f['flags'])}")
+            continue
+        fg = f["gamma"]
+        print(
+            f"{f['id']:>6} {fg['median']:6.3f} {fg['q05']:6.3f} {fg['q95']:6.3f}  "
+            f"{', '.join(f['flags'])}"
+        )
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -229,6 +282,23 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true", help="machine-readable output")
     b.add_argument("--exponent", type=float, default=2.0, help="Phong exponent n (eq. 6)")
     b.set_defaults(func=_baseline)
+    es = sub.add_parser("estimate", help="posterior gloss per facet and for the object")
+    es.add_argument("bundle", help="sequence bundle folder")
+    es.add_argument(
+        "--sky",
+        default="gensky-clear",
+        help="illumination model (default: "
+        "gensky-clear; also point-sun, gensky-intermediate, gensky-overcast, "
+        "cie-1..cie-15, perez)",
+    )
+    es.add_argument("--camera", default="auto", choices=["auto", "linear", "power"])
+    es.add_argument("--noise", default="relative", choices=["relative", "gaussian", "student"])
+    es.add_argument("--jobs", type=int, default=2, help="worker processes")
+    es.add_argument("--seed", type=int, default=0)
+    es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
+    es.add_argument("--json", action="store_true", help="machine-readable output")
+    es.add_argument("--quiet", action="store_true", help="no progress line")
+    es.set_defaults(func=_estimate)
     return p
 
 
@@ -236,6 +306,11 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return args.func(args)
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (ValueError, FileNotFoundError, RuntimeError) as err:
         print(f"bayesgloss {args.command}: error: {err}", file=sys.stderr)
         return 2

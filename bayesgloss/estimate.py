@@ -284,8 +284,22 @@ def shared_gloss(draws, priors: lk.Priors, *, n_gamma: int = 201, n_logn: int = 
 
 
 def _quantiles(x) -> dict:
-    q = np.quantile(np.asarray(x, float), [0.05, 0.5, 0.95])
-    return {"median": float(q[1]), "q05": float(q[0]), "q95": float(q[2])}
+    """Median, 5 and 95 % quantiles, and the 90 % highest-density interval.
+
+    For a gamma at the edge of [0, 1] the equal-tailed interval cannot hold
+    the edge; the highest-density interval can.
+    """
+    import arviz as az
+
+    x = np.asarray(x, float).ravel()
+    q = np.quantile(x, [0.05, 0.5, 0.95])
+    hdi = az.hdi(x, hdi_prob=0.9)
+    return {
+        "median": float(q[1]),
+        "q05": float(q[0]),
+        "q95": float(q[2]),
+        "hdi90": [float(hdi[0]), float(hdi[1])],
+    }
 
 
 def estimate_bundle(
