@@ -117,6 +117,7 @@ def test_results_do_not_depend_on_the_number_of_jobs():
         chunk=100,
         min_tau_multiple=5,
         draws_per_ensemble=40,
+        max_steps=400,
     )
     one = sampling.sample_posterior(data, jobs=1, **kw)
     two = sampling.sample_posterior(data, jobs=2, **kw)
