@@ -163,7 +163,11 @@ def integrated_time(chain, c: float = 5.0) -> np.ndarray:
         [steps]; NaN where a parameter does not move at all.
     """
     x = np.asarray(chain, dtype=float)
-    rho = np.nanmean(_autocorr_fft(x), axis=2)  # (N, B, P)
+    acf = _autocorr_fft(x)
+    moving = np.isfinite(acf[0])  # walkers whose series varies, (B, W, P)
+    count = moving.sum(axis=1)  # (B, P)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(moving, acf, 0.0).sum(axis=2) / count  # walker mean, (N, B, P)
     taus = 2.0 * np.cumsum(rho, axis=0) - 1.0
     m = np.arange(len(taus))[:, None, None]
     window = np.argmax(m >= c * taus, axis=0)  # first M with M >= c tau(M)
@@ -289,8 +293,8 @@ def sample_posterior(
     moves=DEFAULT_MOVES,
     seed: int | None = 0,
     jobs: int = 1,
-    stream_size: int = 512,
-    slots: int = 160,
+    stream_size: int = 600,
+    slots: int = 128,
     progress=None,
 ) -> PosteriorSamples:
     """Sample every facet's posterior with the batched ensemble sampler.
@@ -458,8 +462,8 @@ def _sample_stream(
                 acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
                 del kept[f]
                 finished[k] = True
-            else:  # check again when the estimate says it may be enough, or 25 % later
-                next_check[k] = max(need, 1.25 * n_steps)
+            else:  # check again when the estimate says it may be enough, or 50 % later
+                next_check[k] = max(need, 1.5 * n_steps)
         if np.any(finished):
             keep_places = ~finished
             facets = [f for f, k in zip(facets, keep_places, strict=True) if k]
