@@ -306,7 +306,7 @@ def test_figure_script_writes_a_png(name, tmp_path):
 @pytest.mark.slow
 @pytest.mark.radiance
 def test_findings_hold_on_fresh_renders(tmp_path):
-    # ~4-6 min on 2 cores: the 60 sequences at 64 px rendered with Radiance afresh,
+    # ~6-7 min on 2 cores: the 60 sequences at 64 px rendered with Radiance afresh,
     # the baseline run on them, and the same findings checked.
     from bayesgloss import sequences
 
