@@ -18,6 +18,10 @@ Rules the paper leaves open, fixed here
   of that set) and the facet is flagged ``"no-exact-match"``.
 - Frames: only frames valid in the observations (sun up, no saturation...)
   compete for the peak, in both the observed and the predicted curves.
+- Equal peak values: the earliest frame wins (``numpy.argmax``). Radiance
+  pictures store 8-bit mantissas, so flat-topped matt curves can hold two
+  exactly equal frames (6-14 % of the paper's clear-sky matt facets); a
+  tolerance-based tie rule is a known improvement not yet made.
 - Exponent: n = 2 by default, overridable. The paper does not state its
   value (it calls 1-200 typical), but its Fig. 3 shows the six gloss
   factors 0, 0.2, ..., 1 peaking in distinct frames, which needs a broad
