@@ -834,3 +834,37 @@ def luminance_rgb(rgb: ArrayLike) -> NDArray[np.float64]:
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"rgb must have 3 channels on its last axis, got shape {arr.shape}")
     return arr @ np.asarray(LUMINANCE_WEIGHTS)
+
+
+def gloss_of_radiance_material_fresnel(
+    kind: str, specularity: ArrayLike, colour_luminance: ArrayLike, cos_view: ArrayLike
+) -> NDArray[np.float64]:
+    """Gloss factor gamma of a roughness-0 Radiance material, with its Fresnel raise.
+
+    Radiance's ``normal.c`` raises the specularity of a smooth material by its
+    Fresnel estimate at the viewing angle (:func:`radiance_material`), so the
+    fraction of the energy reflected toward a viewer that comes from the
+    mirror is specular / (specular + diffuse) of that function, higher than
+    :func:`gloss_of_radiance_material` away from normal viewing: for plastic
+    of specularity 0.5 and grey 0.5 it is 2/3 at normal view and rises toward
+    1 at grazing views. This is the energy fraction a whole-curve estimate
+    sees on Radiance renderings of smooth materials.
+
+    Parameters
+    ----------
+    kind : {"plastic", "metal"}
+    specularity, colour_luminance : float or array_like
+        As :func:`gloss_of_radiance_material` [-].
+    cos_view : array_like
+        Cosine between the surface normal and the view direction [-].
+
+    Returns
+    -------
+    ndarray
+        Gamma per viewing cosine [-].
+    """
+    m = radiance_material(kind, colour_luminance, specularity, 0.0, cos_view)
+    spec = np.asarray(m.specular, dtype=float)
+    diff = np.asarray(m.diffuse_ambient, dtype=float)
+    total = spec + diff
+    return np.divide(spec, total, out=np.zeros_like(total), where=total > 0)

@@ -102,11 +102,7 @@ def fresnel_gloss(b, kind: str, specularity: float, colour: float) -> float:
     from bayesgloss import reflectance
 
     cos_view = b.view_geometry().cos_view
-    m = reflectance.radiance_material(kind, colour, specularity, 0.0, cos_view)
-    spec = np.asarray(m.specular, float)
-    diff = np.asarray(m.diffuse_ambient, float)
-    with np.errstate(invalid="ignore"):
-        g = np.where(spec + diff > 0, spec / (spec + diff), 0.0)
+    g = reflectance.gloss_of_radiance_material_fresnel(kind, specularity, colour, cos_view)
     return float(np.mean(g))
 
 

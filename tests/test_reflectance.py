@@ -763,3 +763,19 @@ def test_radiance_material_direct_sun_matches_rtrace(radiance_bin, tmp_path):
         np.testing.assert_allclose(got[c], expected, rtol=RTRACE_RTOL, err_msg=kind)
         # without dirnorm's Fresnel reduction it would be off by F(cos_i)
         assert not np.allclose(got[c], m.diffuse_ambient * cos_i[:, None] / np.pi, rtol=RTRACE_RTOL)
+
+
+def test_fresnel_gloss_of_radiance_material():
+    from bayesgloss.reflectance import (
+        gloss_of_radiance_material,
+        gloss_of_radiance_material_fresnel,
+    )
+
+    cos = np.array([1.0, 0.7, 0.3, 0.05])
+    g = gloss_of_radiance_material_fresnel("plastic", 0.5, 0.5, cos)
+    # at normal view the Fresnel estimate of the shipped Radiance is ~0: 2/3
+    assert abs(g[0] - gloss_of_radiance_material("plastic", 0.5, 0.5)) < 2e-3
+    assert np.all(np.diff(g) > 0) and g[-1] > 0.9  # rises toward grazing
+    # matt (specularity 0, below Radiance's Fresnel threshold) stays 0; mirrors stay 1
+    np.testing.assert_array_equal(gloss_of_radiance_material_fresnel("metal", 0.0, 0.5, cos), 0)
+    np.testing.assert_allclose(gloss_of_radiance_material_fresnel("plastic", 1.0, 0.5, cos), 1)

@@ -1,0 +1,157 @@
+"""Posterior report: one page of figures per bundle, readable at a glance.
+
+Panels: (a) a frame of the sequence, (b) gamma painted on the image per
+facet (posterior median) and (c) the width of its 90 % interval, (d) the
+object's gloss (population posterior) beside the paper's baseline, (e) the
+data of three facets (least, middle, most glossy) with posterior predictive
+bands, (f) convergence diagnostics of every facet (R-hat, bulk ESS).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["posterior_report"]
+
+
+def _tone_map(rgb: np.ndarray) -> np.ndarray:
+    """Display a linear frame: luminance scaled to its 99th percentile, gamma 1/2.2."""
+    y = np.nanpercentile(rgb, 99)
+    return np.clip(np.nan_to_num(rgb / max(y, 1e-12)), 0, 1) ** (1 / 2.2)
+
+
+def _crop(labels: np.ndarray, margin: int = 4):
+    """Row and column slices around the labelled facets."""
+    rows, cols = np.nonzero(labels > 0)
+    if len(rows) == 0:
+        return slice(None), slice(None)
+    r0, r1 = max(rows.min() - margin, 0), rows.max() + margin + 1
+    c0, c1 = max(cols.min() - margin, 0), cols.max() + margin + 1
+    return slice(r0, r1), slice(c0, c1)
+
+
+def _paint(labels: np.ndarray, ids: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """An image of per-facet values on the label image (NaN on background)."""
+    lut = np.full(int(labels.max()) + 1, np.nan)
+    lut[np.asarray(ids, int)] = values
+    return lut[labels]
+
+
+def posterior_report(bundle, result, baseline=None, path="report.png", title=None) -> Path:
+    """Write the one-page posterior report of a bundle as a PNG.
+
+    Parameters
+    ----------
+    bundle : bayesgloss.bundle.Bundle
+    result : bayesgloss.estimate.EstimateResult
+    baseline : bayesgloss.baseline.BaselineResult, optional
+    path : path
+        Output PNG.
+    title : str, optional
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    idata, summary = result.idata, result.summary
+    ids = idata.posterior["facet"].values
+    gamma = idata.posterior["gamma"].values  # (E, S, F)
+    flat = gamma.reshape(-1, gamma.shape[-1])
+    med = np.median(flat, axis=0)
+    q05, q95 = np.quantile(flat, [0.05, 0.95], axis=0)
+
+    fig = plt.figure(figsize=(15, 9.5), constrained_layout=True)
+    grid = fig.add_gridspec(2, 4)
+    t_mid = int(np.argmax(np.nansum(idata.observed_data["y"].values, axis=0)))
+    frame, _ = bundle.linear_frame(t_mid)
+    crop = _crop(bundle.labels)
+    ax = fig.add_subplot(grid[0, 0])
+    ax.imshow(_tone_map(np.asarray(frame))[crop])
+    ax.set_title(f"(a) frame {t_mid} ({bundle.times[t_mid]:%H:%M} UTC)")
+    ax.axis("off")
+
+    ax = fig.add_subplot(grid[0, 1])
+    im = ax.imshow(_paint(bundle.labels, ids, med)[crop], cmap="viridis", vmin=0, vmax=1)
+    ax.set_title("(b) gloss gamma per facet (posterior median)")
+    ax.axis("off")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="gamma [-]")
+
+    ax = fig.add_subplot(grid[0, 2])
+    im = ax.imshow(
+        _paint(bundle.labels, ids, q95 - q05),
+        cmap="magma_r",
+        vmin=0,
+        vmax=max(0.05, float(np.max(q95 - q05))),
+    )
+    ax.set_title("(c) width of the 90 % interval")
+    ax.axis("off")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="q95 - q05 [-]")
+
+    ax = fig.add_subplot(grid[0, 3])
+    obj = summary["object"]["gamma"]
+    ax.hist(med, bins=np.linspace(0, 1, 41), color="0.75", label="facet medians")
+    ax.axvspan(
+        obj["q05"],
+        obj["q95"],
+        color="tab:blue",
+        alpha=0.3,
+        label=f"object (population) 90 %: {obj['q05']:.3f}-{obj['q95']:.3f}",
+    )
+    ax.axvline(obj["median"], color="tab:blue", lw=2, label=f"object median {obj['median']:.3f}")
+    if baseline is not None and np.isfinite(baseline.object_gloss):
+        ax.axvline(
+            baseline.object_gloss,
+            color="tab:red",
+            ls="--",
+            lw=2,
+            label=f"baseline (peak frame) {baseline.object_gloss:.3f}",
+        )
+    ax.set(xlabel="gamma [-]", ylabel="facets", title="(d) object gloss", xlim=(0, 1))
+    ax.legend(fontsize=8, loc="upper center")
+
+    # (e) three facets: the least and most glossy and the middle one, with bands
+    order = np.argsort(med)
+    pick = order[np.linspace(0, len(order) - 1, 3).round().astype(int)]
+    y = idata.observed_data["y"].values
+    pp = idata.posterior_predictive["y"].values.reshape(-1, *y.shape)
+    frames = np.arange(y.shape[1])
+    for j, k in enumerate(pick):
+        ax = fig.add_subplot(grid[1, j])
+        lo, mid, hi = np.quantile(pp[:, k], [0.05, 0.5, 0.95], axis=0)
+        ax.fill_between(frames, lo, hi, color="tab:blue", alpha=0.25, label="90 % predictive")
+        ax.plot(frames, mid, color="tab:blue", lw=1.5, label="predictive median")
+        ax.plot(frames, y[k], "ko", ms=4, label="observed")
+        ax.set(
+            title=f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{q05[k]:.2f}, {q95[k]:.2f}]",
+            xlabel="frame",
+            ylabel="luminance",
+        )
+        if j == 0:
+            ax.legend(fontsize=8)
+
+    ax = fig.add_subplot(grid[1, 3])
+    rhat = np.array([f.get("rhat", np.nan) for f in summary["facets"] if f["gamma"]])
+    ess = np.array([f.get("ess_bulk", np.nan) for f in summary["facets"] if f["gamma"]])
+    conv = np.array([f["converged"] for f in summary["facets"] if f["gamma"]])
+    ax.scatter(ess, rhat, c=np.where(conv, "tab:green", "tab:red"), s=18)
+    ax.axhline(1.01, color="0.4", ls="--")
+    ax.axvline(400, color="0.4", ls="--")
+    ax.set(
+        xscale="log",
+        xlabel="bulk ESS of gamma",
+        ylabel="R-hat of gamma",
+        title=f"(f) convergence: {conv.sum()}/{len(conv)} facets (green)",
+    )
+    fig.suptitle(
+        title
+        or f"{Path(str(bundle.path)).name}: posterior gloss "
+        f"({summary['illumination']}, {summary['noise']} noise)"
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
