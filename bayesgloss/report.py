@@ -75,7 +75,7 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
 
     ax = fig.add_subplot(grid[0, 1])
     im = ax.imshow(_paint(bundle.labels, ids, med)[crop], cmap="viridis", vmin=0, vmax=1)
-    ax.set_title("(b) gloss gamma per facet (posterior median)")
+    ax.set_title("(b) gamma per facet (median)")
     ax.axis("off")
     fig.colorbar(im, ax=ax, shrink=0.8, label="gamma [-]")
 
@@ -86,7 +86,7 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
         vmin=0,
         vmax=max(0.05, float(np.max(q95 - q05))),
     )
-    ax.set_title("(c) width of the 90 % interval")
+    ax.set_title("(c) 90 % interval width")
     ax.axis("off")
     fig.colorbar(im, ax=ax, shrink=0.8, label="q95 - q05 [-]")
 
@@ -127,7 +127,7 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
         ax.set(
             title=f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{q05[k]:.2f}, {q95[k]:.2f}]",
             xlabel="frame",
-            ylabel="luminance",
+            ylabel=f"luminance [{summary.get('unit', 'relative')}]",
         )
         if j == 0:
             ax.legend(fontsize=8)
