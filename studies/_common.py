@@ -1,0 +1,264 @@
+"""Shared plumbing of the sensitivity studies (issue 7): configs, simulated
+objects, batched posterior fits, the baseline, and writing results.
+
+Not library code: the studies' scripts import it, nothing in ``bayesgloss``
+does. Every study simulates (or renders) one object per condition, a set of
+facets of the paper hemisphere made of one material (gamma, n), and puts the
+posterior object gloss (the hierarchical population mean of
+:func:`bayesgloss.estimate.population_gloss`) beside the paper's peak-frame
+baseline (mean over sunlit facets, :func:`bayesgloss.baseline.peak_frame_gloss`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bayesgloss import baseline, estimate, render, sampling, scene, sky, sun
+from bayesgloss import likelihood as lk
+
+STUDIES = Path(__file__).resolve().parent
+#: Frames with the sun at least this high (sun_z) are used [-] (about 1 deg).
+SUN_UP_Z = 0.02
+#: Facets seen at least this obliquely (cos of the view angle) are used [-].
+MIN_COS_VIEW = 0.1
+
+
+def load_config(name: str, quick: bool = False, override: dict | None = None) -> dict:
+    """The committed config ``studies/configs/<name>.json``; with ``quick`` its
+    ``"quick"`` entries replace the top-level ones; ``override`` last."""
+    cfg = json.loads((STUDIES / "configs" / f"{name}.json").read_text())
+    quick_part = cfg.pop("quick", {})
+    if quick:
+        cfg.update(quick_part)
+    cfg.update(override or {})
+    return cfg
+
+
+def parse_args(name: str, argv=None, doc: str = "") -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0] if doc else name)
+    ap.add_argument("--quick", action="store_true", help="the config's tiny test-size run")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default=str(STUDIES / "out" / name))
+    ap.add_argument(
+        "--results",
+        default=None,
+        help="copy small results and the figure here (default: studies/results/<name>, "
+        "not in --quick runs)",
+    )
+    args = ap.parse_args(argv)
+    if args.results is None and not args.quick:
+        args.results = str(STUDIES / "results" / name)
+    return args
+
+
+def publish(out: Path, results: str | None, files) -> None:
+    """Copy the small result files and the figure from ``out`` to ``results``."""
+    if not results:
+        return
+    dest = Path(results)
+    dest.mkdir(parents=True, exist_ok=True)
+    for f in files:
+        shutil.copy2(out / f, dest / f)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Facets of the paper hemisphere under one sky: geometry, bases, frames."""
+
+    geometry: render.ViewGeometry
+    bases: render.FacetBases
+    sun_direction: np.ndarray
+    solar_hours: np.ndarray
+    valid: np.ndarray  # (F, T)
+    facet_index: np.ndarray  # indices into the hemisphere's facets
+
+
+def _subset(g: render.ViewGeometry, idx) -> render.ViewGeometry:
+    return render.ViewGeometry(g.normal[idx], g.view_direction[idx], g.center[idx], g.occluder)
+
+
+def paper_sequence(view: str, sky_model: str, **overrides) -> scene.Sequence:
+    """:func:`bayesgloss.scene.paper_sequence`, also for ``"point-sun"`` (built
+    here from the sequence's sun: that sky takes no ground reflectance)."""
+    if sky_model != "point-sun":
+        return scene.paper_sequence(view=view, sky_model=sky_model, **overrides)
+    seq = scene.paper_sequence(view=view, sky_model="gensky-clear", **overrides)
+    p = {**scene.PAPER, **overrides}
+    sun_dir = sun.sun_direction_at(seq.times, p["latitude"], p["longitude"], refraction=False)
+    return dataclasses.replace(seq, sky=sky.daylight("point-sun", sun_dir))
+
+
+def facet_choice(view: str, n_facets: int, seed: int) -> np.ndarray:
+    """Indices of ``n_facets`` facets seen from ``view`` that the sun lights at
+    some time of the paper's day (all of them if fewer), chosen with ``seed``."""
+    seq = paper_sequence(view, "point-sun")
+    g = seq.geometry
+    sun = seq.sky.sun_direction
+    lit = np.any((g.normal @ sun.T > 0) & (sun[:, 2] > SUN_UP_Z), axis=1)
+    ok = np.flatnonzero((g.cos_view > MIN_COS_VIEW) & lit)
+    if n_facets >= len(ok):
+        return ok
+    rng = np.random.default_rng(seed)
+    return np.sort(rng.choice(ok, n_facets, replace=False))
+
+
+@functools.lru_cache(maxsize=64)
+def paper_scene(
+    view: str, sky_model: str, facets: tuple, solar_hours: tuple | None = None
+) -> Scene:
+    """The paper scene's chosen facets under ``sky_model`` with forward-model bases.
+
+    ``"point-sun"`` uses no ground (the paper's model), as
+    :func:`bayesgloss.estimate.bundle_bases` does.
+    """
+    over = {} if solar_hours is None else {"solar_hours": np.asarray(solar_hours, float)}
+    seq = paper_sequence(view, sky_model, **over)
+    idx = np.asarray(facets, int)
+    g = _subset(seq.geometry, idx)
+    ground = "sky" if sky_model == "point-sun" else "plane"
+    bases = render.facet_bases(g, seq.sky, ground=ground)
+    sun = np.asarray(seq.sky.sun_direction)
+    valid = np.broadcast_to(sun[:, 2] > SUN_UP_Z, bases.diffuse.shape).copy()
+    return Scene(g, bases, sun, seq.solar_hours, valid, idx)
+
+
+def simulate(sc: Scene, gamma: float, exponent: float, rel_noise: float, rng, scale=89.5):
+    """Facet curves of one material through the forward model with relative
+    noise of sd ``rel_noise`` x (prediction + 1 % floor) (the likelihood's
+    default noise model), (F, T). ``rel_noise`` 0 gives the noiseless curves."""
+    design = lk.curve_data(
+        np.ones_like(sc.bases.diffuse),
+        sc.valid,
+        sc.bases,
+        priors=lk.Priors(log_s_center=float(np.log(scale))),
+    )
+    theta = np.empty((len(sc.valid), 1, 4))
+    theta[..., 0] = gamma
+    theta[..., 1] = np.log(exponent)
+    theta[..., 2] = np.log(scale)
+    theta[..., 3] = np.log(max(rel_noise, 1e-12))
+    if rel_noise <= 0:
+        return lk.predict(theta, design)[:, 0]
+    return lk.simulate(theta, design, rng)[:, 0]
+
+
+@dataclass
+class Fit:
+    """Posterior summary of one object (group of facets)."""
+
+    facet_median: np.ndarray
+    facet_q05: np.ndarray
+    facet_q95: np.ndarray
+    median: float
+    q05: float
+    q95: float
+    converged: float  # fraction of facets that met the sampler's stopping rule
+
+
+def fit_groups(groups, cfg: dict, jobs: int = 2, camera: str = "linear") -> list[Fit]:
+    """Posterior of every facet of every group in one batched sampler call,
+    then the object's gloss per group.
+
+    Parameters
+    ----------
+    groups : list of dict
+        ``y`` (F, T), ``valid`` (F, T), ``bases`` (FacetBases), optional
+        ``censored`` (F, T).
+    cfg : dict
+        The study config: ``seed``, ``sampler`` (keyword arguments of
+        :func:`bayesgloss.sampling.sample_posterior`) and ``population_draws``.
+    """
+    if not groups:
+        return []
+    exps = groups[0]["bases"].exponents
+    y = np.concatenate([g["y"] for g in groups])
+    valid = np.concatenate([g["valid"] for g in groups])
+    cens = np.concatenate([g.get("censored", np.zeros_like(g["valid"])) for g in groups])
+    bases = render.FacetBases(
+        np.concatenate([g["bases"].diffuse for g in groups]),
+        np.concatenate([g["bases"].glossy for g in groups]),
+        exps,
+    )
+    data = lk.curve_data(y, valid, bases, censored=cens, camera=camera)
+    opts = dict(cfg.get("sampler", {}))
+    n = len(y)
+    opts.setdefault("stream_size", max(8, -(-n // max(jobs, 1))))
+    samples = sampling.sample_posterior(data, seed=cfg["seed"], jobs=jobs, **opts)
+    gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
+    max_steps = opts.get("max_steps", 8000)
+    conv = samples.n_steps < max_steps
+    out, lo = [], 0
+    for k, g in enumerate(groups):
+        hi = lo + len(g["y"])
+        pop = estimate.population_gloss(
+            gam[lo:hi], seed=cfg["seed"] + k, max_draws=cfg.get("population_draws", 200)
+        )["mu"]
+        q = np.quantile(gam[lo:hi], [0.05, 0.5, 0.95], axis=1)
+        out.append(
+            Fit(
+                q[1],
+                q[0],
+                q[2],
+                float(np.median(pop)),
+                float(np.quantile(pop, 0.05)),
+                float(np.quantile(pop, 0.95)),
+                float(np.mean(conv[lo:hi])),
+            )
+        )
+        lo = hi
+    return out
+
+
+def baseline_fit(sc: Scene, y, valid=None) -> baseline.BaselineResult:
+    """The paper's peak-frame estimate on the same curves."""
+    v = sc.valid if valid is None else valid
+    return baseline.peak_frame_gloss(
+        y, v, sc.geometry, sc.sun_direction, frame_hours=sc.solar_hours
+    )
+
+
+def write_table(path: Path, rows: list[dict]) -> None:
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def read_table(path: Path) -> list[dict]:
+    """CSV rows with numbers parsed (floats where they parse)."""
+    import csv
+
+    def num(v):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+
+    with open(path, newline="") as fh:
+        return [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
+def save_figure(fig, path: Path, dpi: int = 100) -> None:
+    fig.savefig(path, dpi=dpi)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+
+
+def plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
