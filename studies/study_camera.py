@@ -1,0 +1,182 @@
+"""Camera study: how much does a nonlinear, quantised, saturating camera
+bias the object's gloss, and does modelling the response remove the bias?
+
+Linear facet radiance from the forward model (1 % relative noise) is exposed
+so that the object's brightest value sits at ``exposure`` x the top code,
+clipped, passed through a response (power 1/g with g = 1 ... 2.4, or sRGB)
+and quantised to 8, 10 or 12 bits. Three ways to estimate from the codes:
+
+- ``ignored``: codes treated as linear radiance, clipped values as exact;
+- ``modelled``: the likelihood's ``camera="power"`` with the exponent g
+  unknown, values at the top code censored;
+- ``undone``: the known response inverted first, then the linear model,
+  values at the top code censored.
+
+The baseline sees the codes (only the frame of the peak matters to it).
+
+Usage: python studies/study_camera.py [--quick] [--jobs 2] [--out DIR]
+Writes studies/out/camera/{objects.csv, summary.json, camera.png}.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import _common as C
+import numpy as np
+
+NAME = "camera"
+
+
+def encode(v, response):
+    """Relative linear value in [0, 1] -> response output in [0, 1]."""
+    v = np.clip(v, 0.0, 1.0)
+    if response == "srgb":  # IEC 61966-2-1
+        return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+    return v ** (1.0 / float(response))
+
+
+def decode(c, response):
+    """Inverse of :func:`encode`."""
+    c = np.clip(c, 0.0, 1.0)
+    if response == "srgb":
+        return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return c ** float(response)
+
+
+def camera_codes(y, valid, cond):
+    """Codes in [0, 1] (F, T) and the mask of values at the top code."""
+    top = 2 ** int(cond["bits"]) - 1
+    peak = np.max(np.where(valid, y, 0.0))
+    v = cond["exposure"] * y / peak
+    codes = np.round(encode(v, cond["response"]) * top) / top
+    return codes, (codes >= 1.0) & valid
+
+
+def run(cfg: dict, jobs: int) -> list[dict]:
+    idx = C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"])
+    sc = C.paper_scene(cfg["view"], cfg["sky"], tuple(idx))
+    rng = np.random.default_rng(cfg["seed"])
+    cells = []
+    groups = {m: [] for m in cfg["methods"]}
+    for gamma in cfg["gammas"]:
+        y_lin = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
+        for cond in cfg["conditions"]:
+            codes, top = camera_codes(y_lin, sc.valid, cond)
+            cells.append((gamma, cond, C.baseline_fit(sc, codes), float(top.mean())))
+            if "ignored" in groups:
+                groups["ignored"].append({"y": codes, "valid": sc.valid, "bases": sc.bases})
+            if "modelled" in groups:
+                groups["modelled"].append(
+                    {"y": codes, "valid": sc.valid, "bases": sc.bases, "censored": top}
+                )
+            if "undone" in groups:
+                groups["undone"].append(
+                    {
+                        "y": decode(codes, cond["response"]),
+                        "valid": sc.valid,
+                        "bases": sc.bases,
+                        "censored": top,
+                    }
+                )
+    fits = {
+        m: C.fit_groups(g, cfg, jobs, camera="power" if m == "modelled" else "linear")
+        for m, g in groups.items()
+    }
+    rows = []
+    for k, (gamma, cond, base, clipped) in enumerate(cells):
+        row = {
+            "true_gamma": gamma,
+            "condition": cond["label"],
+            "response": cond["response"],
+            "bits": cond["bits"],
+            "exposure": cond["exposure"],
+            "clipped_fraction": clipped,
+            "baseline": base.object_gloss,
+        }
+        for m, f in fits.items():
+            row[f"{m}_median"] = f[k].median
+            row[f"{m}_q05"] = f[k].q05
+            row[f"{m}_q95"] = f[k].q95
+            row[f"{m}_converged"] = f[k].converged
+        rows.append(row)
+    return rows
+
+
+def summarise(rows, methods) -> dict:
+    out = {}
+    for cond in dict.fromkeys(r["condition"] for r in rows):
+        sel = [r for r in rows if r["condition"] == cond]
+        d = {
+            "baseline_mean_abs_error": float(
+                np.mean([abs(r["baseline"] - r["true_gamma"]) for r in sel])
+            )
+        }
+        for m in methods:
+            d[f"{m}_mean_abs_error"] = float(
+                np.mean([abs(r[f"{m}_median"] - r["true_gamma"]) for r in sel])
+            )
+            d[f"{m}_covered"] = int(
+                sum(r[f"{m}_q05"] <= r["true_gamma"] <= r[f"{m}_q95"] for r in sel)
+            )
+        d["objects"] = len(sel)
+        out[cond] = d
+    return out
+
+
+def plot(out: Path) -> None:
+    """The figure, from the saved table only."""
+    plt = C.plt()
+    rows = C.read_table(out / "objects.csv")
+    methods = json.loads((out / "summary.json").read_text())["config"]["methods"]
+    gammas = sorted({r["true_gamma"] for r in rows})
+    labels = list(dict.fromkeys(r["condition"] for r in rows))
+    fig, axes = plt.subplots(
+        len(gammas), 1, figsize=(9, 2.9 * len(gammas) + 0.6), squeeze=False, sharex=True
+    )
+    colours = {"ignored": "C1", "modelled": "C0", "undone": "C2"}
+    for ax, g in zip(axes[:, 0], gammas, strict=True):
+        sel = {r["condition"]: r for r in rows if r["true_gamma"] == g}
+        x = np.arange(len(labels))
+        for j, m in enumerate(methods):
+            med = np.array([sel[c][f"{m}_median"] for c in labels])
+            lo = med - [sel[c][f"{m}_q05"] for c in labels]
+            hi = [sel[c][f"{m}_q95"] for c in labels] - med
+            ax.errorbar(
+                x + 0.15 * (j - 1),
+                med,
+                yerr=[lo, hi],
+                fmt="o",
+                ms=4,
+                color=colours[m],
+                label=f"posterior, response {m}",
+            )
+        ax.plot(x + 0.3, [sel[c]["baseline"] for c in labels], "s", ms=4, c="C3", label="baseline")
+        ax.axhline(g, color="k", lw=0.8, ls="--")
+        ax.set_ylabel(f"gamma (true {g:g})")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=4, loc="lower left")
+    axes[-1, 0].set_xticks(np.arange(len(labels)), labels, rotation=20, fontsize=8)
+    axes[0, 0].set_title("object gloss from camera codes (90 % intervals); dashed: truth")
+    fig.tight_layout()
+    C.save_figure(fig, out / f"{NAME}.png")
+
+
+def main(argv=None, config: dict | None = None) -> dict:
+    args = C.parse_args(NAME, argv, __doc__)
+    cfg = C.load_config(NAME, args.quick, config)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = run(cfg, args.jobs)
+    C.write_table(out / "objects.csv", rows)
+    summary = {"config": cfg, "summary": summarise(rows, cfg["methods"])}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    plot(out)
+    C.publish(out, args.results, ["objects.csv", "summary.json", f"{NAME}.png"])
+    return summary
+
+
+if __name__ == "__main__":
+    main()
