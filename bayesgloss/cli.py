@@ -216,14 +216,16 @@ def _estimate(args: argparse.Namespace) -> int:
 
     from . import estimate
 
-    def progress(done, total):
+    def progress(done, total, what="facets"):
         if not args.quiet:
             print(
-                f"\rbayesgloss estimate: {done}/{total} facets", end="", file=sys.stderr, flush=True
+                f"\rbayesgloss estimate: {done}/{total} {what}", end="", file=sys.stderr, flush=True
             )
 
+    if len(args.bundle) > 1 or args.scheduler:
+        return _estimate_many(args, progress)
     res = estimate.estimate_bundle(
-        args.bundle,
+        args.bundle[0],
         illumination=args.sky,
         noise=args.noise,
         camera=args.camera,
@@ -241,18 +243,23 @@ def _estimate(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(res.summary, indent=2))
         return 0
-    o = res.summary["object"]
+    _print_estimate(args.bundle[0], res.summary)
+    return 0
+
+
+def _print_estimate(name, summary) -> None:
+    o = summary["object"]
     g = o["gamma"]
     print(
-        f"{args.bundle}: posterior gloss ({args.sky}, {res.summary['noise']} noise, "
-        f"{res.summary['camera']} camera)"
+        f"{name}: posterior gloss ({summary['illumination']}, {summary['noise']} noise, "
+        f"{summary['camera']} camera)"
     )
     print(
         f"object gamma {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}], "
         f"{o['facets_converged']}/{o['facets']} facets converged"
     )
     print(f"{'facet':>6} {'gamma':>6} {'q05':>6} {'q95':>6}  flags")
-    for f in res.summary["facets"]:
+    for f in summary["facets"]:
         if f["gamma"] is None:
             print(f"{f['id']:>6}      -      -      -  {', '.join(f['flags'])}")
             continue
@@ -261,6 +268,52 @@ def _estimate(args: argparse.Namespace) -> int:
             f"{f['id']:>6} {fg['median']:6.3f} {fg['q05']:6.3f} {fg['q95']:6.3f}  "
             f"{', '.join(f['flags'])}"
         )
+
+
+def _estimate_many(args, progress) -> int:
+    """Several bundles: one unit each, resumable, local processes or a Dask cluster."""
+    import json
+
+    from . import bundle as bundle_io
+    from . import runner
+
+    if not args.out:
+        raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
+    for b in args.bundle:  # reject bad bundles before any work starts
+        bundle_io.read_bundle(b)
+    units = [
+        (
+            Path(b).name,
+            {
+                "bundle": str(Path(b).resolve()),
+                "illumination": args.sky,
+                "noise": args.noise,
+                "camera": args.camera,
+                "seed": args.seed,
+            },
+        )
+        for b in args.bundle
+    ]
+    folders = runner.run_units(
+        runner.estimate_unit,
+        units,
+        args.out,
+        jobs=args.jobs,
+        scheduler=args.scheduler,
+        progress=lambda d, t: progress(d, t, "bundles"),
+    )
+    if not args.quiet:
+        print(file=sys.stderr)
+    summaries = {
+        b: json.loads((f / "summary.json").read_text())
+        for b, f in zip(args.bundle, folders, strict=True)
+    }
+    if args.json:
+        print(json.dumps(summaries, indent=2))
+        return 0
+    for b, f in zip(args.bundle, folders, strict=True):
+        g = summaries[b]["object"]["gamma"]
+        print(f"{b}: object gamma {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}] -> {f}")
     return 0
 
 
@@ -300,7 +353,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--exponent", type=float, default=2.0, help="Phong exponent n (eq. 6)")
     b.set_defaults(func=_baseline)
     es = sub.add_parser("estimate", help="posterior gloss per facet and for the object")
-    es.add_argument("bundle", help="sequence bundle folder")
+    es.add_argument("bundle", nargs="+", help="sequence bundle folder(s)")
     es.add_argument(
         "--sky",
         default="gensky-clear",
@@ -311,7 +364,18 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument("--camera", default="auto", choices=["auto", "linear", "power"])
     es.add_argument("--noise", default="relative", choices=["relative", "gaussian", "student"])
     es.add_argument("--jobs", type=int, default=2, help="worker processes")
+    es.add_argument(
+        "--scheduler",
+        help="Dask scheduler address (tcp://host:8786): run "
+        "bundles on a Dask cluster instead of local processes",
+    )
     es.add_argument("--seed", type=int, default=0)
+    es.add_argument(
+        "--max-steps",
+        type=int,
+        default=8000,
+        help="production steps at most per facet (unconverged facets are flagged)",
+    )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")
     es.add_argument("--quiet", action="store_true", help="no progress line")

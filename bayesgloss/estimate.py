@@ -229,7 +229,9 @@ def population_gloss(
     return {"mu": mu_s, "kappa": k_s}
 
 
-def shared_gloss(draws, priors: lk.Priors, *, n_gamma: int = 201, n_logn: int = 93):
+def shared_gloss(
+    draws, priors: lk.Priors, *, n_gamma: int = 201, n_logn: int = 93, max_draws: int = 500
+):
     """One material for all facets: posterior of (gamma, log n) on a grid.
 
     Each facet's marginal posterior of (gamma, log n) is estimated by a
@@ -249,6 +251,8 @@ def shared_gloss(draws, priors: lk.Priors, *, n_gamma: int = 201, n_logn: int = 
         marginal, and the median and 5/95 % quantiles of gamma.
     """
     d = np.asarray(draws, dtype=float)
+    if d.shape[1] > max_draws:  # evenly spaced draws bound the kernel sums' cost
+        d = d[:, np.linspace(0, d.shape[1] - 1, max_draws).round().astype(int)]
     gx = np.linspace(0, 1, n_gamma)
     nx = np.linspace(*priors.log_n, n_logn)
     log_post = np.zeros((n_gamma, n_logn))
