@@ -51,7 +51,13 @@ import numpy as np
 
 from .render import ViewGeometry, paper_point_sun
 
-__all__ = ["BaselineResult", "peak_frame_gloss", "DEFAULT_GLOSS_GRID", "DEFAULT_EXPONENT"]
+__all__ = [
+    "BaselineResult",
+    "peak_frame_gloss",
+    "bundle_peak_frame_gloss",
+    "DEFAULT_GLOSS_GRID",
+    "DEFAULT_EXPONENT",
+]
 
 DEFAULT_GLOSS_GRID = np.linspace(0.0, 1.0, 101)
 DEFAULT_EXPONENT = 2.0
@@ -219,4 +225,36 @@ def peak_frame_gloss(
         grid,
         float(exponent),
         direct,
+    )
+
+
+def bundle_peak_frame_gloss(bundle, **options) -> BaselineResult:
+    """The peak-frame estimate of a sequence bundle.
+
+    Parameters
+    ----------
+    bundle : path or bayesgloss.bundle.Bundle
+    **options
+        Passed to :func:`peak_frame_gloss` (``gloss_grid``, ``exponent``).
+
+    Returns
+    -------
+    BaselineResult
+        From the bundle's facet curves and validity, its sun and geometry, with
+        frames timed in local apparent solar time.
+    """
+    from . import bundle as bundle_io
+    from . import sun
+
+    b = bundle if isinstance(bundle, bundle_io.Bundle) else bundle_io.read_bundle(bundle)
+    curves = bundle_io.facet_curves(b)
+    hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
+    return peak_frame_gloss(
+        curves.luminance,
+        curves.valid,
+        b.view_geometry(),
+        b.sun_direction,
+        ids=curves.ids,
+        frame_hours=hours,
+        **options,
     )

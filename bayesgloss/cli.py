@@ -29,9 +29,7 @@ def _demo(args: argparse.Namespace) -> int:
     import json
     import time
 
-    import numpy as np
-
-    from . import baseline, bundle, estimate, reflectance, report, sequences, sun
+    from . import baseline, bundle, estimate, reflectance, report, sequences
 
     t0 = time.perf_counter()
     out = Path(args.out)
@@ -54,16 +52,7 @@ def _demo(args: argparse.Namespace) -> int:
         [cfg], out / "bundles", jobs=args.jobs, progress=not args.quiet
     )
     b = bundle.read_bundle(path)
-    curves = bundle.facet_curves(b)
-    hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
-    base = baseline.peak_frame_gloss(
-        curves.luminance,
-        curves.valid,
-        b.view_geometry(),
-        b.sun_direction,
-        ids=curves.ids,
-        frame_hours=hours,
-    )
+    base = baseline.bundle_peak_frame_gloss(b)
     res = estimate.estimate_bundle(b, illumination=cfg.sky, jobs=args.jobs, seed=0)
     summary = {
         **res.summary,
@@ -182,20 +171,9 @@ def _baseline(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from . import baseline, bundle, sun
+    from . import baseline
 
-    b = bundle.read_bundle(args.bundle)
-    curves = bundle.facet_curves(b)
-    hours = sun.local_solar_time(b.times, b.site.longitude)
-    res = baseline.peak_frame_gloss(
-        curves.luminance,
-        curves.valid,
-        b.view_geometry(),
-        b.sun_direction,
-        ids=curves.ids,
-        exponent=args.exponent,
-        frame_hours=np.unwrap(hours, period=24),
-    )
+    res = baseline.bundle_peak_frame_gloss(args.bundle, exponent=args.exponent)
     if args.json:
         print(json.dumps(res.to_json(), indent=2))
         return 0

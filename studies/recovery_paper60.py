@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesgloss import baseline, bundle, estimate, sequences, sun
+from bayesgloss import baseline, bundle, estimate, sequences
 
 CONFIG = {"seed": 7, "image_size": 128}
 
@@ -39,16 +39,7 @@ def main(argv=None):
     for cfg, path in zip(configs, paths, strict=True):
         b = bundle.read_bundle(path)
         res = estimate.estimate_bundle(b, illumination=cfg.sky, seed=CONFIG["seed"], jobs=args.jobs)
-        curves = bundle.facet_curves(b)
-        hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
-        base = baseline.peak_frame_gloss(
-            curves.luminance,
-            curves.valid,
-            b.view_geometry(),
-            b.sun_direction,
-            ids=curves.ids,
-            frame_hours=hours,
-        )
+        base = baseline.bundle_peak_frame_gloss(b)
         o = res.summary["object"]
         truth = b.truth["gloss"]
         lit = bool(np.any(base.direct_sun))
