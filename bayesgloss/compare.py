@@ -329,7 +329,8 @@ def bundle_models(
 def _fold(theta, copies: int) -> np.ndarray:
     """(C*B, W, P) -> (B, C*W, P): copies of every problem side by side."""
     cb, w, p = theta.shape
-    return theta.reshape(copies, cb // copies, w, p).transpose(1, 0, 2, 3).reshape(-1, copies * w, p)
+    th = theta.reshape(copies, cb // copies, w, p).transpose(1, 0, 2, 3)
+    return th.reshape(-1, copies * w, p)
 
 
 def _unfold(values, copies: int) -> np.ndarray:
@@ -418,9 +419,8 @@ def fit_model(
         valid = model.data.valid
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        rhat = np.stack(
-            [np.asarray(az.rhat(np.moveaxis(d[..., j], 0, -1))).reshape(-1) for j in range(p)], -1
-        )
+        ds = az.convert_to_dataset({"theta": d.transpose(1, 2, 0, 3)})  # (E, S, B, P)
+        rhat = np.asarray(az.rhat(ds)["theta"].values).reshape(b, p)
     return ModelFit(model, d, ll, valid, rhat.reshape(b, p), tau)
 
 
@@ -432,7 +432,9 @@ def _idata(log_lik):
     """InferenceData with one log-likelihood variable ``y`` (E, S, N)."""
     import arviz as az
 
-    return az.from_dict(log_likelihood={"y": log_lik})
+    return az.from_dict(
+        posterior={"draw_index": np.zeros(log_lik.shape[:2])}, log_likelihood={"y": log_lik}
+    )
 
 
 def loo_compare(fits: dict, *, problem: int | None = None) -> dict:
@@ -603,11 +605,21 @@ def savage_dickey(gamma_draws, *, prior_density: float = 1.0, ess=None) -> dict:
 # thermodynamic integration
 
 
-def power_ladder(n_rungs: int = 24, power: float = 5.0) -> np.ndarray:
-    """beta_k = (k / (K - 1))^power, k = 0..K-1 (Friel & Pettitt 2008, sec. 2.2)."""
-    if n_rungs < 3:
-        raise ValueError(f"need at least 3 rungs, got {n_rungs}")
-    return (np.arange(n_rungs) / (n_rungs - 1)) ** float(power)
+def power_ladder(n_rungs: int = 64, beta_min: float = 1e-24) -> np.ndarray:
+    """Temperature ladder: 0, then ``n_rungs - 1`` rungs geometric from
+    ``beta_min`` to 1.
+
+    With the wide priors of the facet model, E_beta[ln L] at small beta is
+    of order -1 / beta down to beta ~ 1e-20 (prior draws of a tiny noise
+    scale give ln L ~ -1e20), so the ladder must be uniform in ln beta
+    rather than the power ladder beta = (k / K)^5 of Friel & Pettitt (2008,
+    sec. 2.2), which leaves most of that range in its first interval.
+    """
+    if n_rungs < 4 or n_rungs % 2:
+        raise ValueError(f"need an even number of rungs >= 4, got {n_rungs}")
+    if not 0 < beta_min < 1:
+        raise ValueError(f"beta_min must lie in (0, 1), got {beta_min}")
+    return np.concatenate([[0.0], np.geomspace(beta_min, 1.0, n_rungs - 1)])
 
 
 @dataclass
@@ -637,15 +649,24 @@ class EvidenceResult:
 
 
 def _corrected_trapezoid(betas, mean, var):
-    """Friel, Hurn & Wyse (2014), eq. 8: trapezoid plus -h^2/12 (V_k+1 - V_k),
-    using d E_beta[ln L] / d beta = Var_beta[ln L]; also the weights of the means."""
-    h = np.diff(betas)[:, None]
-    trap = 0.5 * h * (mean[1:] + mean[:-1])
-    corr = -(h**2) / 12.0 * (var[1:] - var[:-1])
+    """int_beta1^1 E_beta[ln L] d beta in u = ln beta, (B,), and the weights of
+    the rung means (K, 1).
+
+    g(u) = beta E_beta[ln L] with g'(u) = beta E + beta^2 Var (as
+    d E_beta[ln L] / d beta = Var_beta[ln L]); the trapezoid rule in u with
+    the derivative correction -h^2/12 (g'_k+1 - g'_k) (Friel, Hurn & Wyse
+    2014, eq. 8, written in u).
+    """
+    u = np.log(betas)[:, None]
+    b = betas[:, None]
+    g = b * mean
+    dg = g + b**2 * var
+    h = np.diff(u, axis=0)
+    total = (0.5 * h * (g[1:] + g[:-1]) - h**2 / 12.0 * (dg[1:] - dg[:-1])).sum(0)
     w = np.zeros((len(betas), 1))
     w[1:] += 0.5 * h
     w[:-1] += 0.5 * h
-    return (trap + corr).sum(0), w
+    return total, w * b
 
 
 def thermodynamic_integration(
@@ -671,8 +692,10 @@ def thermodynamic_integration(
     min(1, exp((beta_k+1 - beta_k)(ln L_k - ln L_k+1))) (parallel tempering;
     each rung keeps its distribution).
 
-    Quadrature: the trapezoid rule with the variance correction of Friel,
-    Hurn & Wyse (2014, eq. 8). Uncertainty: the Monte Carlo standard error
+    Quadrature (:func:`power_ladder`): from beta_1 on, the trapezoid rule in
+    ln beta with the variance correction of Friel, Hurn & Wyse (2014, eq.
+    8); below beta_1, beta_1 E_beta1[ln L] (the rung at beta = 0, the prior,
+    is sampled only to carry walkers between modes). Uncertainty: the Monte Carlo standard error
     by batch means (the integral from each of ``n_blocks`` contiguous blocks
     of the production run; swaps correlate neighbouring rungs, so rung-wise
     errors cannot simply be added) combined with a quadrature error, the
@@ -686,7 +709,7 @@ def thermodynamic_integration(
     start : array_like (B, W, P)
         Starting walkers (copied to every rung).
     betas : array_like (K,), optional
-        Increasing, from 0 to 1, odd length (default ``power_ladder(25)``).
+        Increasing, from 0 to 1, even length (default :func:`power_ladder`).
     burn, steps, thin : int
         Steps discarded, steps kept, and the thinning of the kept ln L.
     n_blocks : int
@@ -694,9 +717,9 @@ def thermodynamic_integration(
     seed : int or numpy.random.Generator
     """
     rng = np.random.default_rng(seed)
-    betas = power_ladder(25) if betas is None else np.asarray(betas, dtype=float)
-    if betas[0] != 0 or betas[-1] != 1 or np.any(np.diff(betas) <= 0) or len(betas) % 2 == 0:
-        raise ValueError("betas must increase from 0 to 1 with an odd number of rungs")
+    betas = power_ladder() if betas is None else np.asarray(betas, dtype=float)
+    if betas[0] != 0 or betas[-1] != 1 or np.any(np.diff(betas) <= 0) or len(betas) % 2:
+        raise ValueError("betas must increase from 0 to 1 with an even number of rungs")
     start = np.asarray(start, dtype=float)
     b, w, p = start.shape
     k = len(betas)
@@ -763,14 +786,21 @@ def thermodynamic_integration(
     tau = thin * sampling.integrated_time(lls.reshape(n_keep, k * b, w, 1))[..., 0]
     tau = np.nan_to_num(tau.reshape(k, b), nan=1.0)
     ess = np.clip(n_keep * thin * w / np.maximum(tau, 1.0), 2.0, n_keep * w)
-    full, weights = _corrected_trapezoid(betas, mean, var)
-    half, _ = _corrected_trapezoid(betas[::2], mean[::2], var[::2])
+    # rung 0 (the prior) carries the walkers between modes; the integral
+    # starts at beta_1: int_0^beta1 E d beta lies in [beta_1 E_0, beta_1 E_1]
+    # (E_beta increases with beta); beta_1 E_1 is taken and its size counted
+    # as quadrature error
+    lo, rest = betas[1], slice(1, None)
+    full, weights = _corrected_trapezoid(betas[rest], mean[rest], var[rest])
+    half, _ = _corrected_trapezoid(betas[rest][::2], mean[rest][::2], var[rest][::2])
+    head = lo * mean[1]
+    full = full + head
     # batch means in time: swaps correlate neighbouring rungs, so the
     # integral's Monte Carlo error is taken from its value over time blocks
     blocks = np.array_split(np.arange(n_keep), n_blocks)
-    per_block = np.stack([(weights * lls[blk].mean(axis=(0, 3))).sum(0) for blk in blocks])
+    per_block = np.stack([(weights * lls[blk][:, rest].mean(axis=(0, 3))).sum(0) for blk in blocks])
     mc_se = per_block.std(axis=0, ddof=1) / np.sqrt(n_blocks)
-    quad = np.abs(full - half) / 15.0
+    quad = np.abs(full - head - half) / 3.0 + np.abs(head)
     return EvidenceResult(
         full,
         np.sqrt(mc_se**2 + quad**2),
@@ -926,10 +956,10 @@ def compare_bundle(
     skies = sky_posterior(sky_z) if len(sky_z) > 1 else {"prob": {illumination[0]: 1.0}}
     mix = None
     if all(("lambert+phong", s) in fits for s in illumination):
-        draws = {
-            s: fits[("lambert+phong", s)].draws[..., 0].reshape(len(fits[("lambert+phong", s)].draws), -1)
-            for s in illumination
-        }
+        draws = {}
+        for s in illumination:
+            g = fits[("lambert+phong", s)].draws[..., 0]
+            draws[s] = g.reshape(len(g), -1)
         g = marginal_gamma(draws, skies["prob"], seed=seed)
         q = np.quantile(g, [0.05, 0.5, 0.95], axis=-1)
         mix = [{"median": float(b), "q05": float(a), "q95": float(c)} for a, b, c in q.T]
