@@ -393,6 +393,7 @@ def estimate_bundle(
         "illumination": illumination,
         "noise": noise,
         "camera": camera,
+        "unit": curves.unit,
         "sampler": {"seconds": samples.seconds, "median_steps": float(np.median(samples.n_steps))},
     }
     return EstimateResult(idata, summary, samples)

@@ -4,7 +4,9 @@ Panels: (a) a frame of the sequence, (b) gamma painted on the image per
 facet (posterior median) and (c) the width of its 90 % interval, (d) the
 object's gloss (population posterior) beside the paper's baseline, (e) the
 data of three facets (least, middle, most glossy) with posterior predictive
-bands, (f) convergence diagnostics of every facet (R-hat, bulk ESS).
+bands, (f) convergence diagnostics of every facet (R-hat, bulk ESS), (g) a
+corner plot of the middle facet's parameters, (h) the model comparison
+table when one was run.
 """
 
 from __future__ import annotations
@@ -39,7 +41,56 @@ def _paint(labels: np.ndarray, ids: np.ndarray, values: np.ndarray) -> np.ndarra
     return lut[labels]
 
 
-def posterior_report(bundle, result, baseline=None, path="report.png", title=None) -> Path:
+def _corner(fig, cell, idata, k, plt) -> None:
+    """Pairwise posterior of one facet's parameters (a corner plot)."""
+    names = [v for v in ("gamma", "n", "s", "sigma") if v in idata.posterior]
+    draws = [idata.posterior[v].values[..., k].ravel() for v in names]
+    logs = {"n", "s", "sigma"}
+    draws = [np.log10(d) if v in logs else d for v, d in zip(names, draws, strict=True)]
+    labels = [f"log10 {v}" if v in logs else v for v in names]
+    sub = cell.subgridspec(len(names), len(names), wspace=0.05, hspace=0.05)
+    fid = idata.posterior["facet"].values[k]
+    for i in range(len(names)):
+        for j in range(i + 1):
+            ax = fig.add_subplot(sub[i, j])
+            if i == j:
+                ax.hist(draws[i], bins=40, color="tab:blue", alpha=0.7)
+                ax.set_yticks([])
+            else:
+                ax.hist2d(draws[j], draws[i], bins=40, cmap="Blues")
+            if i == len(names) - 1:
+                ax.set_xlabel(labels[j], fontsize=8)
+            else:
+                ax.set_xticklabels([])
+            if j == 0 and i > 0:
+                ax.set_ylabel(labels[i], fontsize=8)
+            elif j > 0:
+                ax.set_yticklabels([])
+            ax.tick_params(labelsize=7)
+            if i == 0 and j == 0:
+                ax.set_title(f"(g) corner plot, facet {fid}", fontsize=10, loc="left")
+
+
+def _comparison_table(ax, comparison) -> None:
+    """The model comparison table, as text (or a note that none was run)."""
+    ax.axis("off")
+    ax.set_title("(h) model comparison", loc="left")
+    if not comparison:
+        ax.text(
+            0.0,
+            0.9,
+            "no model comparison in this run\n(bayesgloss compare BUNDLE)",
+            va="top",
+            family="monospace",
+            fontsize=9,
+        )
+        return
+    ax.text(0.0, 0.95, str(comparison), va="top", family="monospace", fontsize=8)
+
+
+def posterior_report(
+    bundle, result, baseline=None, path="report.png", title=None, comparison=None
+) -> Path:
     """Write the one-page posterior report of a bundle as a PNG.
 
     Parameters
@@ -50,6 +101,8 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
     path : path
         Output PNG.
     title : str, optional
+    comparison : str or pandas.DataFrame, optional
+        A model comparison table to show (panel h).
     """
     import matplotlib
 
@@ -63,8 +116,8 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
     med = np.median(flat, axis=0)
     q05, q95 = np.quantile(flat, [0.05, 0.95], axis=0)
 
-    fig = plt.figure(figsize=(15, 9.5), constrained_layout=True)
-    grid = fig.add_gridspec(2, 4)
+    fig = plt.figure(figsize=(15, 14.5), constrained_layout=True)
+    grid = fig.add_gridspec(3, 4, height_ratios=[1, 1, 1.15])
     t_mid = int(np.argmax(np.nansum(idata.observed_data["y"].values, axis=0)))
     frame, _ = bundle.linear_frame(t_mid)
     crop = _crop(bundle.labels)
@@ -145,6 +198,8 @@ def posterior_report(bundle, result, baseline=None, path="report.png", title=Non
         ylabel="R-hat of gamma",
         title=f"(f) convergence: {conv.sum()}/{len(conv)} facets (green)",
     )
+    _corner(fig, grid[2, :2], idata, pick[1], plt)
+    _comparison_table(fig.add_subplot(grid[2, 2:]), comparison)
     fig.suptitle(
         title
         or f"{Path(str(bundle.path)).name}: posterior gloss "
