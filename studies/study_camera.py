@@ -2,7 +2,7 @@
 bias the object's gloss, and does modelling the response remove the bias?
 
 Linear facet radiance from the forward model (1 % relative noise) is exposed
-so that the object's brightest value sits at ``exposure`` x the top code,
+so that the object's brightest value sits at ``exposure`` x the top code (values above it clip),
 clipped, passed through a response (power 1/g with g = 1 ... 2.4, or sRGB)
 and quantised to 8, 10 or 12 bits. Three ways to estimate from the codes:
 
