@@ -9,6 +9,11 @@ demo
     40 N, rendered with Radiance (cached after the first run). Runs the
     paper's baseline and the posterior, and writes summary.json,
     posterior.nc and the report figure report.png.
+compare BUNDLE
+    Compare reflectance models (Lambert, Phong, Lambert plus Phong or Ward)
+    and skies on a bundle: PSIS-LOO with Pareto-k warnings, evidence by
+    thermodynamic integration, Savage-Dickey Bayes factors of Lambert, and
+    the skies' posterior probabilities.
 curves BUNDLE
     Read a sequence bundle and print each facet's luminance per frame
     (``-`` marks entries left out: sun below the horizon, NaN or saturated
@@ -295,6 +300,59 @@ def _estimate_many(args, progress) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    import json
+
+    from . import compare
+
+    skies = tuple(args.skies.split(","))
+    models = tuple(args.models.split(","))
+    opts = {"steps": args.steps, "burn": max(100, args.steps // 3)}
+    res = compare.compare_bundle(
+        args.bundle,
+        reflectance=models,
+        illumination=skies,
+        level=args.level,
+        seed=args.seed,
+        fit_options=opts,
+        evidence_options=opts,
+    )
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    print(
+        f"{args.bundle}: model comparison, {args.level} level, "
+        f"{len(res['facets'])} facets (PSIS-LOO: "
+        + ("leave-one-facet-out" if args.level == "object" else "leave-one-frame-out")
+        + ")"
+    )
+    print(
+        f"{'model':36s} {'elpd_loo':>10} {'se':>7} {'d_elpd':>8} {'dse':>7} "
+        f"{'weight':>6} {'k_max':>6} {'k>0.7':>6}  {'ln Z':>10} {'se':>6} {'ln BF':>8}"
+    )
+    ev = {e["model"]: e for e in res["evidence"]}
+    for r in res["loo"]["table"]:
+        e = ev[r["model"]]
+        flag = "  WARNING: Pareto k > 0.7" if r["warning"] else ""
+        print(
+            f"{r['model']:36s} {r['elpd_loo']:10.1f} {r['se']:7.1f} {r['elpd_diff']:8.1f} "
+            f"{r['dse']:7.1f} {r['weight']:6.3f} {r['pareto_k_max']:6.2f} "
+            f"{r['pareto_k_high']:>3}/{r['n_terms']:<3} {e['log_z']:10.1f} {e['se']:6.2f} "
+            f"{e['log_bf_vs_best']:8.1f}{flag}"
+        )
+    print("ln BF: ln Z of the model minus ln Z of the best (thermodynamic integration)")
+    for sky_name, rows in res["savage_dickey"].items():
+        vals = ", ".join(("<= " if r["bound"] else "") + f"{r['log_bf01']:.2f}" for r in rows[:10])
+        more = " ..." if len(rows) > 10 else ""
+        print(f"Savage-Dickey ln BF(lambert : lambert+phong), {sky_name}: {vals}{more}")
+    probs = ", ".join(f"{k} {v:.3f}" for k, v in res["sky"]["prob"].items())
+    print(f"sky posterior (equal priors): {probs}")
+    not_conv = [k for k, v in res["converged"].items() if not v]
+    if not_conv:
+        print(f"not converged (R-hat >= 1.01): {', '.join(not_conv)}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -358,6 +416,23 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument("--json", action="store_true", help="machine-readable output")
     es.add_argument("--quiet", action="store_true", help="no progress line")
     es.set_defaults(func=_estimate)
+    cm = sub.add_parser("compare", help="Bayesian comparison of reflectance and sky models")
+    cm.add_argument("bundle", help="sequence bundle folder")
+    cm.add_argument(
+        "--skies",
+        default="gensky-clear,gensky-intermediate",
+        help="comma-separated illumination models (default: gensky-clear,gensky-intermediate)",
+    )
+    cm.add_argument(
+        "--models",
+        default="lambert,phong,lambert+phong,lambert+ward",
+        help="comma-separated reflectance models (default: all four)",
+    )
+    cm.add_argument("--level", default="object", choices=["object", "facet"])
+    cm.add_argument("--steps", type=int, default=800, help="sampler steps kept per run")
+    cm.add_argument("--seed", type=int, default=0)
+    cm.add_argument("--json", action="store_true", help="machine-readable output")
+    cm.set_defaults(func=_compare)
     return p
 
 

@@ -678,6 +678,7 @@ def thermodynamic_integration(
     burn: int = 500,
     steps: int = 1500,
     thin: int = 5,
+    swap_every: int = 1,
     n_blocks: int = 10,
     seed=0,
 ) -> EvidenceResult:
@@ -686,8 +687,8 @@ def thermodynamic_integration(
     ln Z = int_0^1 E_beta[ln L] d beta, E_beta over the power posterior
     p_beta proportional to prior x L^beta (Friel & Pettitt 2008, eq. 6). All
     K rungs of all B problems are K x B problems of one
-    :class:`bayesgloss.sampling.BatchedEnsemble`; after every step the
-    walkers of neighbouring rungs (walker w of rung k with walker w of rung
+    :class:`bayesgloss.sampling.BatchedEnsemble`; every ``swap_every`` steps
+    the walkers of neighbouring rungs (walker w of rung k with walker w of rung
     k+1, even and odd pairs in turn) swap with probability
     min(1, exp((beta_k+1 - beta_k)(ln L_k - ln L_k+1))) (parallel tempering;
     each rung keeps its distribution).
@@ -711,7 +712,10 @@ def thermodynamic_integration(
     betas : array_like (K,), optional
         Increasing, from 0 to 1, even length (default :func:`power_ladder`).
     burn, steps, thin : int
-        Steps discarded, steps kept, and the thinning of the kept ln L.
+        Steps discarded, steps kept, and the steps between stored ln L.
+    swap_every : int
+        Steps between swap attempts (1: the most mixing; each attempt costs
+        one more likelihood evaluation of every walker).
     n_blocks : int
         Blocks of the batch-means error.
     seed : int or numpy.random.Generator
@@ -754,32 +758,32 @@ def thermodynamic_integration(
     tries = np.zeros(k - 1)
     for t in range(burn + steps):
         ens.step(coords, log_p)
-        # parallel-tempering swaps between neighbouring rungs
+        store = t >= burn and (t - burn) % thin == 0 and (t - burn) // thin < n_keep
+        if not store and (t + 1) % swap_every:
+            continue
         ll = loglik_of(coords)  # (K*B, W)
-        lpr = prior_of(coords)
-        first = t % 2
-        lo = np.arange(first, k - 1, 2)
-        if len(lo):
-            i = (lo[:, None] * b + np.arange(b)).ravel()
-            j = i + b
-            d_beta = (beta_col[j] - beta_col[i])[:, None]
-            with np.errstate(invalid="ignore", over="ignore"):
-                acc = np.log(rng.random((len(i), w))) < d_beta * (ll[i] - ll[j])
-            acc &= np.isfinite(ll[i]) & np.isfinite(ll[j])
-            ci, cj = coords[i], coords[j]
-            coords[i] = np.where(acc[..., None], cj, ci)
-            coords[j] = np.where(acc[..., None], ci, cj)
-            lli, llj = ll[i], ll[j]
-            ll[i], ll[j] = np.where(acc, llj, lli), np.where(acc, lli, llj)
-            pi, pj = lpr[i], lpr[j]
-            lpr[i], lpr[j] = np.where(acc, pj, pi), np.where(acc, pi, pj)
-            with np.errstate(invalid="ignore"):
-                log_p[:] = np.where(np.isfinite(lpr), lpr + beta_col[:, None] * ll, -np.inf)
-            if t >= burn:
-                swaps[lo] += acc.reshape(len(lo), b * w).mean(1)
-                tries[lo] += 1
-        if t >= burn and (t - burn) % thin == 0 and (t - burn) // thin < n_keep:
+        if store:
             lls[(t - burn) // thin] = ll
+        if (t + 1) % swap_every:
+            continue
+        # parallel-tempering swaps between neighbouring rungs
+        lpr = prior_of(coords)
+        lo = np.arange((t // swap_every) % 2, k - 1, 2)
+        i = (lo[:, None] * b + np.arange(b)).ravel()
+        j = i + b
+        d_beta = (beta_col[j] - beta_col[i])[:, None]
+        with np.errstate(invalid="ignore", over="ignore"):
+            acc = np.log(rng.random((len(i), w))) < d_beta * (ll[i] - ll[j])
+        acc &= np.isfinite(ll[i]) & np.isfinite(ll[j])
+        for arr in (coords, ll, lpr):
+            ai, aj = arr[i], arr[j]
+            mask = acc[..., None] if arr.ndim == 3 else acc
+            arr[i], arr[j] = np.where(mask, aj, ai), np.where(mask, ai, aj)
+        with np.errstate(invalid="ignore"):
+            log_p[:] = np.where(np.isfinite(lpr), lpr + beta_col[:, None] * ll, -np.inf)
+        if t >= burn:
+            swaps[lo] += acc.reshape(len(lo), b * w).mean(1)
+            tries[lo] += 1
     lls = lls.reshape(n_keep, k, b, w)
     mean = lls.mean(axis=(0, 3))  # (K, B)
     var = lls.var(axis=(0, 3), ddof=1)

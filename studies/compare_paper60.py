@@ -43,7 +43,7 @@ CONFIG = {
         "lambert+ward": {"gamma": 0.5, "log_n": float(np.log(0.1))},
     },
     "evidence": {"burn": 300, "steps": 800},
-    "paper_evidence": {"burn": 300, "steps": 800},
+    "paper_evidence": {"burn": 300, "steps": 600, "n_walkers": 8, "n_rungs": 40},
     "paper_skies": ["gensky-clear", "gensky-intermediate"],
     "paper_reflectance": ["lambert", "lambert+phong"],
 }
@@ -111,57 +111,70 @@ def simulated(cache: str, out: Path) -> dict:
     return res
 
 
-def paper60(cache: str, out: Path, jobs: int = 1) -> dict:
+def _paper_one(cfg, path) -> dict:
+    """Object-level evidence of every (reflectance, sky) model of one sequence."""
+    t0 = time.perf_counter()
+    models = compare.bundle_models(
+        path,
+        reflectance=CONFIG["paper_reflectance"],
+        illumination=tuple(CONFIG["paper_skies"]),
+        level="object",
+    )
+    opts = dict(CONFIG["paper_evidence"])
+    betas = compare.power_ladder(opts.pop("n_rungs"))
+    log_z, se = {}, {}
+    for (r, s), m in models.items():
+        ev = compare.model_evidence(m, seed=CONFIG["seed"], betas=betas, **opts)
+        log_z[(r, s)], se[(r, s)] = float(ev.log_z[0]), float(ev.se[0])
+    sky_z = {
+        s: float(
+            special.logsumexp([log_z[(r, s)] for r in CONFIG["paper_reflectance"]])
+            - np.log(len(CONFIG["paper_reflectance"]))
+        )
+        for s in CONFIG["paper_skies"]
+    }
+    sky = compare.sky_posterior(sky_z)
+    best_sky = sky["best"]
+    lam = log_z[("lambert", best_sky)] - log_z[("lambert+phong", best_sky)]
+    fit = compare.fit_model(models[("lambert+phong", best_sky)], seed=CONFIG["seed"], steps=800)
+    sd = compare.savage_dickey(fit.draws[0, ..., 0].ravel())
+    row = {
+        "name": cfg.name,
+        "view": cfg.view,
+        "material": cfg.material,
+        "specularity": cfg.specularity,
+        "sky": cfg.sky,
+        "sky_prob": sky["prob"],
+        "sky_best": best_sky,
+        "log_bf_sky_best_vs_next": sky["log_bf_best_vs_next"],
+        "log_bf_lambert_ti": lam,
+        "log_bf_lambert_ti_se": float(
+            np.hypot(se[("lambert", best_sky)], se[("lambert+phong", best_sky)])
+        ),
+        "log_bf_lambert_sd": sd["log_bf01"],
+        "sd_bound": sd["bound"],
+        "lambertian": bool(lam > 0),
+        "gamma_median": float(np.median(fit.draws[0, ..., 0])),
+        "rhat_max": float(np.max(fit.rhat)),
+        "log_z": {f"{r}/{s}": v for (r, s), v in log_z.items()},
+        "log_z_se": {f"{r}/{s}": v for (r, s), v in se.items()},
+        "seconds": time.perf_counter() - t0,
+    }
+    print(
+        f"{cfg.name:34s} sky {best_sky:20s} p(true)={sky['prob'][cfg.sky]:.3f} "
+        f"lnBF01(TI) {lam:9.1f} lnBF01(SD) {sd['log_bf01']:7.2f} "
+        f"gamma {row['gamma_median']:.3f} {row['seconds']:.0f}s",
+        flush=True,
+    )
+    return row
+
+
+def paper60(cache: str, out: Path, jobs: int = 2) -> dict:
+    from concurrent.futures import ProcessPoolExecutor
+
     configs, paths = _paths(cache)
-    rows = []
-    for cfg, path in zip(configs, paths, strict=True):
-        t0 = time.perf_counter()
-        models = compare.bundle_models(
-            path,
-            reflectance=CONFIG["paper_reflectance"],
-            illumination=tuple(CONFIG["paper_skies"]),
-            level="object",
-        )
-        log_z, se = {}, {}
-        for (r, s), m in models.items():
-            ev = compare.model_evidence(m, seed=CONFIG["seed"], **CONFIG["paper_evidence"])
-            log_z[(r, s)], se[(r, s)] = float(ev.log_z[0]), float(ev.se[0])
-        sky_z = {
-            s: float(
-                special.logsumexp([log_z[(r, s)] for r in CONFIG["paper_reflectance"]])
-                - np.log(len(CONFIG["paper_reflectance"]))
-            )
-            for s in CONFIG["paper_skies"]
-        }
-        sky = compare.sky_posterior(sky_z)
-        best_sky = sky["best"]
-        lam = log_z[("lambert", best_sky)] - log_z[("lambert+phong", best_sky)]
-        fit = compare.fit_model(models[("lambert+phong", best_sky)], seed=CONFIG["seed"], steps=800)
-        sd = compare.savage_dickey(fit.draws[0, ..., 0].ravel())
-        row = {
-            "name": cfg.name,
-            "view": cfg.view,
-            "material": cfg.material,
-            "specularity": cfg.specularity,
-            "sky": cfg.sky,
-            "sky_prob": sky["prob"],
-            "sky_best": best_sky,
-            "log_bf_lambert_ti": lam,
-            "log_bf_lambert_sd": sd["log_bf01"],
-            "sd_bound": sd["bound"],
-            "lambertian": bool(lam > 0),
-            "gamma_median": float(np.median(fit.draws[0, ..., 0])),
-            "log_z": {f"{r}/{s}": v for (r, s), v in log_z.items()},
-            "log_z_se": {f"{r}/{s}": v for (r, s), v in se.items()},
-            "seconds": time.perf_counter() - t0,
-        }
-        rows.append(row)
-        print(
-            f"{cfg.name:34s} sky {best_sky:20s} p={sky['prob'][cfg.sky]:.3f} "
-            f"lnBF01(TI) {lam:9.1f} lnBF01(SD) {sd['log_bf01']:7.2f} "
-            f"gamma {row['gamma_median']:.3f} {row['seconds']:.0f}s",
-            flush=True,
-        )
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        rows = list(pool.map(_paper_one, configs, paths))
     confusion = {
         t: {
             p: sum(r["sky"] == t and r["sky_best"] == p for r in rows)
@@ -185,10 +198,13 @@ def main(argv=None):
     ap.add_argument("part", choices=["simulated", "paper60"])
     ap.add_argument("--cache", default="/tmp/paper60")
     ap.add_argument("--out", default="studies/results")
+    ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    return simulated(args.cache, out) if args.part == "simulated" else paper60(args.cache, out)
+    if args.part == "simulated":
+        return simulated(args.cache, out)
+    return paper60(args.cache, out, args.jobs)
 
 
 if __name__ == "__main__":
