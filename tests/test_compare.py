@@ -269,5 +269,5 @@ def test_evidence_prefers_generating_model(scene_models):
         chosen = np.array(compare.REFLECTANCE_MODELS)[np.argmax(z, 0)]
         assert np.mean(chosen == gen) >= 0.9, (
             gen,
-            dict(zip(*np.unique(chosen, return_counts=True))),
+            np.unique(chosen, return_counts=True),
         )
