@@ -308,6 +308,7 @@ def _compare(args: argparse.Namespace) -> int:
     skies = tuple(args.skies.split(","))
     models = tuple(args.models.split(","))
     opts = {"steps": args.steps, "burn": max(100, args.steps // 3)}
+    ev_opts = {**opts, "n_walkers": 8, "betas": compare.power_ladder(args.rungs)}
     res = compare.compare_bundle(
         args.bundle,
         reflectance=models,
@@ -315,7 +316,7 @@ def _compare(args: argparse.Namespace) -> int:
         level=args.level,
         seed=args.seed,
         fit_options=opts,
-        evidence_options=opts,
+        evidence_options=ev_opts,
     )
     if args.json:
         print(json.dumps(res, indent=2))
@@ -430,6 +431,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     cm.add_argument("--level", default="object", choices=["object", "facet"])
     cm.add_argument("--steps", type=int, default=800, help="sampler steps kept per run")
+    cm.add_argument(
+        "--rungs", type=int, default=40, help="temperature rungs of the evidence (even)"
+    )
     cm.add_argument("--seed", type=int, default=0)
     cm.add_argument("--json", action="store_true", help="machine-readable output")
     cm.set_defaults(func=_compare)

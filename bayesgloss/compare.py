@@ -587,14 +587,15 @@ def savage_dickey(gamma_draws, *, prior_density: float = 1.0, ess=None) -> dict:
         ``log_bf01`` (ln BF of Lambert over the full model), its ``se``
         (delta method), the ``density`` at 0, and ``bound``: True when the
         density estimate is indistinguishable from 0 (below 2 se); then
-        ``log_bf01`` is an upper bound, ln(2 se / prior density).
+        ``log_bf01`` is an upper bound, ln(2 se / prior density), and
+        ``se`` is None.
     """
     dens, se, h = boundary_density(gamma_draws, ess=ess)
     bound = dens < 2 * se
     value = 2 * se if bound else dens
     return {
         "log_bf01": float(np.log(value / prior_density)),
-        "se": float("nan") if bound else float(se / dens),
+        "se": None if bound else float(se / dens),
         "density": dens,
         "bandwidth": h,
         "bound": bool(bound),
@@ -858,7 +859,7 @@ def sky_posterior(log_z: dict, *, log_z_se: dict | None = None) -> dict:
     out = {"prob": dict(zip(skies, prob.tolist(), strict=True))}
     order = np.argsort(-z)
     out["best"] = skies[order[0]]
-    out["log_bf_best_vs_next"] = float(z[order[0]] - z[order[1]]) if len(z) > 1 else np.inf
+    out["log_bf_best_vs_next"] = float(z[order[0]] - z[order[1]]) if len(z) > 1 else None
     if log_z_se is not None:
         se = np.array([float(log_z_se[s]) for s in skies])
         # d p_i / d lnZ_j = p_i (delta_ij - p_j)
@@ -957,7 +958,10 @@ def compare_bundle(
     for ill in illumination:
         zs = [log_z[names[k]] for k in models if k[1] == ill]
         sky_z[ill] = float(special.logsumexp(zs) - np.log(len(zs)))  # equal model priors
-    skies = sky_posterior(sky_z) if len(sky_z) > 1 else {"prob": {illumination[0]: 1.0}}
+    if len(sky_z) > 1:
+        skies = sky_posterior(sky_z)
+    else:
+        skies = {"prob": {illumination[0]: 1.0}, "best": illumination[0]}
     mix = None
     if all(("lambert+phong", s) in fits for s in illumination):
         draws = {}

@@ -271,3 +271,39 @@ def test_evidence_prefers_generating_model(scene_models):
             gen,
             np.unique(chosen, return_counts=True),
         )
+
+
+@pytest.mark.slow
+@pytest.mark.radiance
+def test_compare_cli_on_a_rendered_bundle(tmp_path):
+    # a small matt hemisphere rendered by Radiance under the CIE clear sky:
+    # the table has the promised fields, Lambert wins, the clear sky is preferred
+    import contextlib
+    import io
+    import json
+
+    from bayesgloss import cli, sequences
+
+    cfg = sequences.SequenceConfig(
+        name="cmp",
+        n_rings=3,
+        n_segments=8,
+        image_size=48,
+        view="SW",
+        solar_hours=tuple(float(h) for h in range(5, 21)),
+    )
+    (path,) = sequences.render_bundles([cfg], tmp_path, progress=False)
+    args = ["compare", str(path), "--models", "lambert,lambert+phong", "--steps", "300"]
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert cli.main([*args, "--json"]) == 0
+    res = json.loads(buf.getvalue())
+    rows = res["loo"]["table"]
+    assert {"elpd_loo", "se", "weight", "pareto_k_max", "warning"} <= set(rows[0])
+    assert res["evidence"][0]["model"] == "lambert/gensky-clear"
+    assert res["sky"]["best"] == "gensky-clear"
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert cli.main(args) == 0
+    assert "ln BF" in buf.getvalue() and "sky posterior" in buf.getvalue()
+    assert cli.main(["compare", str(path), "--models", "cook-torrance"]) == 2
