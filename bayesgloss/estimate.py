@@ -76,11 +76,7 @@ def bundle_bases(
             f"unknown illumination {illumination!r}; valid: {', '.join(ILLUMINATION_MODELS)}"
         )
     rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
-    day = (
-        sky.daylight(illumination, b.sun_direction)
-        if illumination == "point-sun"
-        else (sky.daylight(illumination, b.sun_direction, ground_reflectance=rho))
-    )
+    day = sky.daylight(illumination, b.sun_direction, ground_reflectance=rho)
     ground = "sky" if illumination == "point-sun" else "plane"
     return render.facet_bases(
         b.view_geometry(occluder), day, exponents, ground=ground, ground_reflectance=rho

@@ -1391,8 +1391,13 @@ def _cie_builder(sky_type: int) -> Callable[..., DaylightSky]:
     return build
 
 
-def _point_sun(sun_direction: Any) -> DaylightSky:
-    """No sky; a sun of unit normal irradiance where it is above the horizon."""
+def _point_sun(sun_direction: Any, *, ground_reflectance: float = 0.2) -> DaylightSky:
+    """No sky; a sun of unit normal irradiance where it is above the horizon.
+
+    ``ground_reflectance`` is accepted like every model's, and unused: the
+    paper's illumination has no sky, and its ground glow is zero (a ground
+    plane lit by this sun is the forward model's business).
+    """
     s = _sun_frames(sun_direction)
     omega = sun_solid_angle()
     solar = np.where(s[..., 2] > 0.0, 1.0 / omega, 0.0)

@@ -925,3 +925,13 @@ def test_horizontal_irradiance_quadrature():
     np.testing.assert_allclose(sky.horizontal_irradiance(d, 16, 8), exact, rtol=5e-3)
     with pytest.raises(ValueError, match="n_theta"):
         sky.horizontal_irradiance(d, 0, 8)
+
+
+def test_point_sun_takes_the_common_options():
+    # every model accepts ground_reflectance (the scene passes it to all); the
+    # paper's point sun has no sky and no ground glow whatever its value
+    sun = np.array([[0.0, -0.6, 0.8], [0.0, 0.6, -0.8]])
+    s = sky.daylight("point-sun", sun, ground_reflectance=0.3)
+    np.testing.assert_allclose(s.solar_radiance * s.sun_solid_angle, [1.0, 0.0])
+    np.testing.assert_array_equal(s.ground_radiance, 0.0)
+    np.testing.assert_array_equal(s.radiance(sun[:1]), 0.0)
