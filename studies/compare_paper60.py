@@ -13,7 +13,7 @@ the glossy one not, and which sky made it (posterior probabilities with equal
 priors, evidence summed over the two reflectance models); confusion table.
 
 Usage: python studies/compare_paper60.py [simulated|paper60] [--cache /tmp/paper60]
-Writes studies/results/compare_simulated.json, compare_paper60.json.
+Writes studies/results/compare_simulated_noise<sigma>.json, compare_paper60.json.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from bayesgloss import likelihood as lk
 CONFIG = {
     "seed": 11,
     "noise_sigma": 0.05,
-    "noise_seeds": 1,
+    "noise_seeds": 4,
     "sim_bundle": "paper-W-plastic-0-clear",
     "sim_sky": "gensky-clear",
     "truth": {
@@ -54,60 +54,61 @@ def _paths(cache):
     return configs, sequences.render_bundles(configs, cache, progress=False)
 
 
-def simulated(cache: str, out: Path) -> dict:
+def simulated(cache: str, out: Path, noise: float) -> dict:
     configs, paths = _paths(cache)
     path = dict(zip([c.name for c in configs], paths, strict=True))[CONFIG["sim_bundle"]]
     models = compare.bundle_models(path, illumination=(CONFIG["sim_sky"],))
-    phong = models[("lambert+phong", CONFIG["sim_sky"])]
-    d = phong.data
+    d = models[("lambert+phong", CONFIG["sim_sky"])].data
     # facets with a visible highlight: G(n = 200) peaks above twice D's peak
     g200 = d.glossy[:, np.searchsorted(d.log_n_grid, np.log(200.0))]
     sel = np.nonzero(g200.max(1) > 2 * d.diffuse.max(1))[0]
+    reps = np.tile(sel, CONFIG["noise_seeds"])  # replicates: facets x noise draws
     rng = np.random.default_rng(CONFIG["seed"])
     rows = []
     for gen, truth in CONFIG["truth"].items():
-        gen_model = models[(gen, CONFIG["sim_sky"])]
-        for rep in range(CONFIG["noise_seeds"]):
-            th = np.zeros((len(sel), 1, 4))
-            th[..., 0], th[..., 1] = truth["gamma"], truth["log_n"]
-            th[..., 2] = gen_model.data.log_s_center[sel, None]
-            th[..., 3] = np.log(CONFIG["noise_sigma"])
-            data = gen_model.data.take(sel)
-            y = lk.simulate(th, data, rng)[:, 0]
-            y = np.maximum(y, 1e-6 * y.max(1, keepdims=True))
-            log_z, se = {}, {}
-            for cand, m in models.items():
-                dm = m.data.take(sel)
-                dm = replace(dm, y=np.where(dm.valid, y, 0.0))
-                t0 = time.perf_counter()
-                ev = compare.model_evidence(replace(m, data=dm), seed=rng, **CONFIG["evidence"])
-                log_z[cand[0]], se[cand[0]] = ev.log_z, ev.se
-                print(
-                    f"gen {gen:14s} cand {cand[0]:14s} {time.perf_counter() - t0:5.1f} s",
-                    flush=True,
-                )
-            names = list(log_z)
-            z = np.stack([log_z[n] for n in names])  # (M, F)
-            pick = np.argmax(z, axis=0)
-            for k, f in enumerate(sel):
-                rows.append(
-                    {
-                        "generating": gen,
-                        "facet": int(f),
-                        "seed": rep,
-                        "chosen": names[pick[k]],
-                        "log_z": {n: float(log_z[n][k]) for n in names},
-                        "se": {n: float(se[n][k]) for n in names},
-                    }
-                )
+        data = models[(gen, CONFIG["sim_sky"])].data.take(reps)
+        th = np.zeros((len(reps), 1, 4))
+        th[..., 0], th[..., 1] = truth["gamma"], truth["log_n"]
+        th[..., 2] = data.log_s_center[:, None]
+        th[..., 3] = np.log(noise)
+        y = lk.simulate(th, data, rng)[:, 0]
+        y = np.maximum(y, 1e-6 * y.max(1, keepdims=True))
+        log_z, se = {}, {}
+        for cand, m in models.items():
+            dm = m.data.take(reps)
+            dm = replace(dm, y=np.where(dm.valid, y, 0.0))
+            t0 = time.perf_counter()
+            ev = compare.model_evidence(replace(m, data=dm), seed=rng, **CONFIG["evidence"])
+            log_z[cand[0]], se[cand[0]] = ev.log_z, ev.se
+            print(f"gen {gen:14s} cand {cand[0]:14s} {time.perf_counter() - t0:5.1f} s", flush=True)
+        names = list(log_z)
+        z = np.stack([log_z[n] for n in names])  # (M, R)
+        pick = np.argmax(z, axis=0)
+        for k, f in enumerate(reps):
+            rows.append(
+                {
+                    "generating": gen,
+                    "facet": int(f),
+                    "replicate": k,
+                    "chosen": names[pick[k]],
+                    "log_z": {n: float(log_z[n][k]) for n in names},
+                    "se": {n: float(se[n][k]) for n in names},
+                }
+            )
     summary = {}
     for gen in CONFIG["truth"]:
         r = [x for x in rows if x["generating"] == gen]
         counts = {n: sum(x["chosen"] == n for x in r) for n in CONFIG["truth"]}
         summary[gen] = {"replicates": len(r), "correct": counts[gen], "chosen": counts}
         print(gen, summary[gen], flush=True)
-    res = {"config": CONFIG, "facets": sel.tolist(), "summary": summary, "rows": rows}
-    (out / "compare_simulated.json").write_text(json.dumps(res, indent=1))
+    res = {
+        "config": CONFIG,
+        "noise_sigma": noise,
+        "facets": sel.tolist(),
+        "summary": summary,
+        "rows": rows,
+    }
+    (out / f"compare_simulated_noise{noise:g}.json").write_text(json.dumps(res, indent=1))
     return res
 
 
@@ -199,11 +200,12 @@ def main(argv=None):
     ap.add_argument("--cache", default="/tmp/paper60")
     ap.add_argument("--out", default="studies/results")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--noise", type=float, default=CONFIG["noise_sigma"], help="relative noise")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.part == "simulated":
-        return simulated(args.cache, out)
+        return simulated(args.cache, out, args.noise)
     return paper60(args.cache, out, args.jobs)
 
 
