@@ -354,6 +354,39 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report(args: argparse.Namespace) -> int:
+    """The one-page posterior report of a saved estimate (``estimate --out``)."""
+    import json
+
+    import arviz as az
+
+    from . import baseline, estimate, report
+    from . import bundle as bundle_io
+
+    result = Path(args.result)
+    summary_path, nc_path = result / "summary.json", result / "posterior.nc"
+    for p in (summary_path, nc_path):
+        if not p.exists():
+            raise FileNotFoundError(
+                f"result '{result}': no {p.name} (made by `bayesgloss estimate BUNDLE --out DIR`)"
+            )
+    summary = json.loads(summary_path.read_text())
+    b = bundle_io.read_bundle(args.bundle or summary["bundle"])
+    idata = az.from_netcdf(str(nc_path))
+    comparison = (
+        (result / "comparison.txt").read_text() if (result / "comparison.txt").exists() else None
+    )
+    out = report.posterior_report(
+        b,
+        estimate.EstimateResult(idata, summary, None),
+        baseline.bundle_peak_frame_gloss(b),
+        Path(args.out) if args.out else result / "report.png",
+        comparison=comparison,
+    )
+    print(out)
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -417,6 +450,11 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument("--json", action="store_true", help="machine-readable output")
     es.add_argument("--quiet", action="store_true", help="no progress line")
     es.set_defaults(func=_estimate)
+    rp = sub.add_parser("report", help="one-page posterior report of a saved estimate")
+    rp.add_argument("result", help="folder written by `bayesgloss estimate BUNDLE --out DIR`")
+    rp.add_argument("--bundle", help="the bundle (default: the one named in summary.json)")
+    rp.add_argument("--out", help="PNG to write (default: RESULT/report.png)")
+    rp.set_defaults(func=_report)
     cm = sub.add_parser("compare", help="Bayesian comparison of reflectance and sky models")
     cm.add_argument("bundle", help="sequence bundle folder")
     cm.add_argument(

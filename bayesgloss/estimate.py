@@ -390,6 +390,7 @@ def estimate_bundle(
         "noise": noise,
         "camera": camera,
         "unit": curves.unit,
+        "bundle": str(b.path),
         "sampler": {"seconds": samples.seconds, "median_steps": float(np.median(samples.n_steps))},
     }
     return EstimateResult(idata, summary, samples)

@@ -48,16 +48,23 @@ def _corner(fig, cell, idata, k, plt) -> None:
     logs = {"n", "s", "sigma"}
     draws = [np.log10(d) if v in logs else d for v, d in zip(names, draws, strict=True)]
     labels = [f"log10 {v}" if v in logs else v for v in names]
+    # axes span the central 99 % of each parameter, so a few stray draws of a
+    # not-yet-converged chain do not squash the picture
+    lims = []
+    for d in draws:
+        lo, hi = np.quantile(d, [0.005, 0.995])
+        pad = 0.05 * (hi - lo) or 1e-6
+        lims.append((lo - pad, hi + pad))
     sub = cell.subgridspec(len(names), len(names), wspace=0.05, hspace=0.05)
     fid = idata.posterior["facet"].values[k]
     for i in range(len(names)):
         for j in range(i + 1):
             ax = fig.add_subplot(sub[i, j])
             if i == j:
-                ax.hist(draws[i], bins=40, color="tab:blue", alpha=0.7)
+                ax.hist(draws[i], bins=40, range=lims[i], color="tab:blue", alpha=0.7)
                 ax.set_yticks([])
             else:
-                ax.hist2d(draws[j], draws[i], bins=40, cmap="Blues")
+                ax.hist2d(draws[j], draws[i], bins=40, range=[lims[j], lims[i]], cmap="Blues")
             if i == len(names) - 1:
                 ax.set_xlabel(labels[j], fontsize=8)
             else:

@@ -30,3 +30,18 @@ def test_unknown_command_and_bad_bundle(tmp_path, capsys):
     assert cli.main(["baseline", str(tmp_path / "missing")]) == 2
     err = capsys.readouterr().err
     assert "bayesgloss baseline: error:" in err and "Traceback" not in err
+
+
+def test_report_of_a_saved_estimate(tmp_path, capsys):
+    # estimate --out writes what report reads; the report names its PNG
+    from conftest import make_synthetic_bundle
+
+    b = make_synthetic_bundle(tmp_path / "b", specularity=0.5)
+    out = tmp_path / "est"
+    assert cli.main(["estimate", str(b), "--out", str(out), "--quiet", "--max-steps", "1500"]) == 0
+    capsys.readouterr()
+    assert cli.main(["report", str(out)]) == 0
+    assert capsys.readouterr().out.strip().endswith("report.png")
+    assert (out / "report.png").stat().st_size > 50_000
+    assert cli.main(["report", str(tmp_path / "nothing")]) == 2
+    assert "no summary.json" in capsys.readouterr().err
