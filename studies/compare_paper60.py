@@ -42,7 +42,7 @@ CONFIG = {
         "lambert+phong": {"gamma": 0.5, "log_n": float(np.log(200.0))},
         "lambert+ward": {"gamma": 0.5, "log_n": float(np.log(0.1))},
     },
-    "evidence": {"burn": 300, "steps": 800},
+    "evidence": {"burn": 300, "steps": 600, "n_walkers": 8},
     "paper_evidence": {"burn": 300, "steps": 600, "n_walkers": 8, "n_rungs": 40},
     "paper_skies": ["gensky-clear", "gensky-intermediate"],
     "paper_reflectance": ["lambert", "lambert+phong"],
@@ -78,7 +78,9 @@ def simulated(cache: str, out: Path, noise: float) -> dict:
             dm = m.data.take(reps)
             dm = replace(dm, y=np.where(dm.valid, y, 0.0))
             t0 = time.perf_counter()
-            ev = compare.model_evidence(replace(m, data=dm), seed=rng, **CONFIG["evidence"])
+            ev = compare.model_evidence(
+                replace(m, data=dm), seed=rng, betas=compare.power_ladder(40), **CONFIG["evidence"]
+            )
             log_z[cand[0]], se[cand[0]] = ev.log_z, ev.se
             print(f"gen {gen:14s} cand {cand[0]:14s} {time.perf_counter() - t0:5.1f} s", flush=True)
         names = list(log_z)
