@@ -190,7 +190,9 @@ def fit_groups(groups, cfg: dict, jobs: int = 2, camera: str = "linear") -> list
     data = lk.curve_data(y, valid, bases, censored=cens, camera=camera)
     opts = dict(cfg.get("sampler", {}))
     n = len(y)
-    opts.setdefault("stream_size", max(8, -(-n // max(jobs, 1))))
+    # two streams whatever --jobs is, so the numbers never depend on the job count
+    # (the sampler's streams are fixed by their size; jobs only spreads them)
+    opts.setdefault("stream_size", max(8, -(-n // 2)))
     samples = sampling.sample_posterior(data, seed=cfg["seed"], jobs=jobs, **opts)
     gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
     max_steps = opts.get("max_steps", 8000)
