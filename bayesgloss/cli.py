@@ -7,8 +7,10 @@ demo
     grey plastic of specularity 0.5, seen from the south-west under gensky's
     clear sky with sun, 19 hourly frames in local solar time on 21 June at
     40 N, rendered with Radiance (cached after the first run). Runs the
-    paper's baseline and the posterior, and writes summary.json,
-    posterior.nc and the report figure report.png.
+    paper's baseline, the posterior and a model comparison (Lambert against
+    Lambert plus Phong, clear against intermediate sky), and writes
+    summary.json, posterior.nc, comparison.txt and the report figure
+    report.png.
 compare BUNDLE
     Compare reflectance models (Lambert, Phong, Lambert plus Phong or Ward)
     and skies on a bundle: PSIS-LOO with Pareto-k warnings, evidence by
@@ -66,7 +68,17 @@ def _demo(args: argparse.Namespace) -> int:
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     res.idata.to_netcdf(str(out / "posterior.nc"))
-    fig = report.posterior_report(b, res, base, out / "report.png")
+    from . import compare
+
+    cmp = compare.compare_bundle_quick(
+        b.path,
+        reflectance=("lambert", "lambert+phong"),
+        illumination=(cfg.sky, "gensky-intermediate"),
+        seed=0,
+    )
+    table = compare.format_comparison(cmp, b.path.name, "object")
+    (out / "comparison.txt").write_text(table + "\n")
+    fig = report.posterior_report(b, res, base, out / "report.png", comparison=table)
     g = res.summary["object"]["gamma"]
     fresnel = reflectance.gloss_of_radiance_material_fresnel(
         cfg.material, cfg.specularity, cfg.colour, b.view_geometry().cos_view
@@ -305,52 +317,19 @@ def _compare(args: argparse.Namespace) -> int:
 
     from . import compare
 
-    skies = tuple(args.skies.split(","))
-    models = tuple(args.models.split(","))
-    opts = {"steps": args.steps, "burn": max(100, args.steps // 3)}
-    ev_opts = {**opts, "n_walkers": 8, "betas": compare.power_ladder(args.rungs)}
-    res = compare.compare_bundle(
+    res = compare.compare_bundle_quick(
         args.bundle,
-        reflectance=models,
-        illumination=skies,
+        reflectance=tuple(args.models.split(",")),
+        illumination=tuple(args.skies.split(",")),
         level=args.level,
         seed=args.seed,
-        fit_options=opts,
-        evidence_options=ev_opts,
+        steps=args.steps,
+        rungs=args.rungs,
     )
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
-    print(
-        f"{args.bundle}: model comparison, {args.level} level, "
-        f"{len(res['facets'])} facets (PSIS-LOO: "
-        + ("leave-one-facet-out" if args.level == "object" else "leave-one-frame-out")
-        + ")"
-    )
-    print(
-        f"{'model':36s} {'elpd_loo':>10} {'se':>7} {'d_elpd':>8} {'dse':>7} "
-        f"{'weight':>6} {'k_max':>6} {'k>0.7':>6}  {'ln Z':>10} {'se':>6} {'ln BF':>8}"
-    )
-    ev = {e["model"]: e for e in res["evidence"]}
-    for r in res["loo"]["table"]:
-        e = ev[r["model"]]
-        flag = "  WARNING: Pareto k > 0.7" if r["warning"] else ""
-        print(
-            f"{r['model']:36s} {r['elpd_loo']:10.1f} {r['se']:7.1f} {r['elpd_diff']:8.1f} "
-            f"{r['dse']:7.1f} {r['weight']:6.3f} {r['pareto_k_max']:6.2f} "
-            f"{r['pareto_k_high']:>3}/{r['n_terms']:<3} {e['log_z']:10.1f} {e['se']:6.2f} "
-            f"{e['log_bf_vs_best']:8.1f}{flag}"
-        )
-    print("ln BF: ln Z of the model minus ln Z of the best (thermodynamic integration)")
-    for sky_name, rows in res["savage_dickey"].items():
-        vals = ", ".join(("<= " if r["bound"] else "") + f"{r['log_bf01']:.2f}" for r in rows[:10])
-        more = " ..." if len(rows) > 10 else ""
-        print(f"Savage-Dickey ln BF(lambert : lambert+phong), {sky_name}: {vals}{more}")
-    probs = ", ".join(f"{k} {v:.3f}" for k, v in res["sky"]["prob"].items())
-    print(f"sky posterior (equal priors): {probs}")
-    not_conv = [k for k, v in res["converged"].items() if not v]
-    if not_conv:
-        print(f"not converged (R-hat >= 1.01): {', '.join(not_conv)}")
+    print(compare.format_comparison(res, args.bundle, args.level))
     return 0
 
 

@@ -998,3 +998,61 @@ def compare_bundle(
         "gamma_sky_marginalised": mix,
         "converged": {names[k]: bool(np.all(f.converged())) for k, f in fits.items()},
     }
+
+
+def compare_bundle_quick(
+    path,
+    *,
+    reflectance=REFLECTANCE_MODELS,
+    illumination=("gensky-clear", "gensky-intermediate"),
+    level: str = "object",
+    seed: int = 0,
+    steps: int = 800,
+    rungs: int = 40,
+) -> dict:
+    """:func:`compare_bundle` with the command line's run lengths: ``steps``
+    kept per fit (a third more as burn-in, at least 100) and ``rungs``
+    temperature rungs of 8 walkers for the evidence."""
+    opts = {"steps": steps, "burn": max(100, steps // 3)}
+    ev_opts = {**opts, "n_walkers": 8, "betas": power_ladder(rungs)}
+    return compare_bundle(
+        path,
+        reflectance=reflectance,
+        illumination=illumination,
+        level=level,
+        seed=seed,
+        fit_options=opts,
+        evidence_options=ev_opts,
+    )
+
+
+def format_comparison(res: dict, name, level: str = "object") -> str:
+    """The comparison table of :func:`compare_bundle` as text."""
+    out = [
+        f"{name}: model comparison, {level} level, {len(res['facets'])} facets (PSIS-LOO: "
+        + ("leave-one-facet-out" if level == "object" else "leave-one-frame-out")
+        + ")",
+        f"{'model':36s} {'elpd_loo':>10} {'se':>7} {'d_elpd':>8} {'dse':>7} "
+        f"{'weight':>6} {'k_max':>6} {'k>0.7':>6}  {'ln Z':>10} {'se':>6} {'ln BF':>8}",
+    ]
+    ev = {e["model"]: e for e in res["evidence"]}
+    for r in res["loo"]["table"]:
+        e = ev[r["model"]]
+        flag = "  WARNING: Pareto k > 0.7" if r["warning"] else ""
+        out.append(
+            f"{r['model']:36s} {r['elpd_loo']:10.1f} {r['se']:7.1f} {r['elpd_diff']:8.1f} "
+            f"{r['dse']:7.1f} {r['weight']:6.3f} {r['pareto_k_max']:6.2f} "
+            f"{r['pareto_k_high']:>3}/{r['n_terms']:<3} {e['log_z']:10.1f} {e['se']:6.2f} "
+            f"{e['log_bf_vs_best']:8.1f}{flag}"
+        )
+    out.append("ln BF: ln Z of the model minus ln Z of the best (thermodynamic integration)")
+    for sky_name, rows in res["savage_dickey"].items():
+        vals = ", ".join(("<= " if r["bound"] else "") + f"{r['log_bf01']:.2f}" for r in rows[:10])
+        more = " ..." if len(rows) > 10 else ""
+        out.append(f"Savage-Dickey ln BF(lambert : lambert+phong), {sky_name}: {vals}{more}")
+    probs = ", ".join(f"{k} {v:.3f}" for k, v in res["sky"]["prob"].items())
+    out.append(f"sky posterior (equal priors): {probs}")
+    not_conv = [k for k, v in res["converged"].items() if not v]
+    if not_conv:
+        out.append(f"not converged (R-hat >= 1.01): {', '.join(not_conv)}")
+    return "\n".join(out)

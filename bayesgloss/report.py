@@ -81,7 +81,7 @@ def _corner(fig, cell, idata, k, plt) -> None:
 def _comparison_table(ax, comparison) -> None:
     """The model comparison table, as text (or a note that none was run)."""
     ax.axis("off")
-    ax.set_title("(h) model comparison", loc="left")
+    ax.set_title("(h) model comparison (k!: a Pareto k above 0.7)", loc="left")
     if not comparison:
         ax.text(
             0.0,
@@ -92,7 +92,19 @@ def _comparison_table(ax, comparison) -> None:
             fontsize=9,
         )
         return
-    ax.text(0.0, 0.95, str(comparison), va="top", family="monospace", fontsize=8)
+    lines = [
+        line.replace("  WARNING: Pareto k > 0.7", "  k!") for line in str(comparison).splitlines()
+    ]
+    text = ax.text(
+        0.0,
+        0.95,
+        "\n".join(line[:118] for line in lines),
+        va="top",
+        family="monospace",
+        fontsize=6.5,
+        transform=ax.transAxes,
+    )
+    text.set_in_layout(False)  # a wide table must not squeeze the figures above
 
 
 def posterior_report(
