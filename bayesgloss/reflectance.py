@@ -541,11 +541,9 @@ def ward_plastic(
         BRDF [sr^-1]; 0 where the light or the viewer is on or below the
         surface.
     """
-    rho = _in_range(colour, "colour", 0.0, 1.0)
-    spec = _in_range(specularity, "specularity", 0.0, 1.0)
-    lobe = ward_isotropic(incident, outgoing, normal, roughness, normalisation=normalisation)
-    diffuse = lambert(incident, outgoing, normal, rho)
-    return (1.0 - spec) * diffuse + spec * lobe
+    return _ward_material(
+        incident, outgoing, normal, colour, specularity, roughness, normalisation, tinted=False
+    )
 
 
 def ward_metal(
@@ -569,11 +567,20 @@ def ward_metal(
         BRDF [sr^-1]; 0 where the light or the viewer is on or below the
         surface.
     """
+    return _ward_material(
+        incident, outgoing, normal, colour, specularity, roughness, normalisation, tinted=True
+    )
+
+
+def _ward_material(
+    incident, outgoing, normal, colour, specularity, roughness, normalisation, tinted: bool
+) -> NDArray[np.float64]:
+    """(1 - spec) colour / pi + spec lobe, the lobe tinted by the colour for metal."""
     rho = _in_range(colour, "colour", 0.0, 1.0)
     spec = _in_range(specularity, "specularity", 0.0, 1.0)
     lobe = ward_isotropic(incident, outgoing, normal, roughness, normalisation=normalisation)
     diffuse = lambert(incident, outgoing, normal, rho)
-    return (1.0 - spec) * diffuse + rho * spec * lobe
+    return (1.0 - spec) * diffuse + (rho if tinted else 1.0) * spec * lobe
 
 
 # --------------------------------------------------------------------------
