@@ -264,3 +264,18 @@ def plt():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def finish(
+    name: str, out: Path, results, cfg: dict, tables: dict, summary, plot, published=None
+) -> dict:
+    """The end of every study: tables as CSV, ``summary.json`` (config and
+    summary), the figure drawn from the saved tables, and the copies into
+    ``studies/results/<name>/`` (``published``: which tables, default all)."""
+    for file, rows in tables.items():
+        write_table(out / file, rows)
+    doc = {"config": cfg, "summary": summary}
+    (out / "summary.json").write_text(json.dumps(doc, indent=1))
+    plot(out)
+    publish(out, results, [*(published or tables), "summary.json", f"{name}.png"])
+    return doc

@@ -15,7 +15,6 @@ Writes studies/out/geometry/{facets.csv, objects.csv, summary.json, geometry.png
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import _common as C
@@ -166,13 +165,15 @@ def main(argv=None, config: dict | None = None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     facets, objects = run(cfg, args.jobs)
-    C.write_table(out / "facets.csv", facets)
-    C.write_table(out / "objects.csv", objects)
-    summary = {"config": cfg, "summary": summarise(facets)}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    plot(out)
-    C.publish(out, args.results, ["facets.csv", "objects.csv", "summary.json", f"{NAME}.png"])
-    return summary
+    return C.finish(
+        NAME,
+        out,
+        args.results,
+        cfg,
+        {"facets.csv": facets, "objects.csv": objects},
+        summarise(facets),
+        plot,
+    )
 
 
 if __name__ == "__main__":

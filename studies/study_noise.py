@@ -148,13 +148,16 @@ def main(argv=None, config: dict | None = None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     objects, facets = run(cfg, args.jobs)
-    C.write_table(out / "objects.csv", objects)
-    C.write_table(out / "facets.csv", facets)
-    summary = {"config": cfg, "summary": summarise(objects, facets)}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    plot(out)
-    C.publish(out, args.results, ["objects.csv", "summary.json", f"{NAME}.png"])
-    return summary
+    return C.finish(
+        NAME,
+        out,
+        args.results,
+        cfg,
+        {"objects.csv": objects, "facets.csv": facets},
+        summarise(objects, facets),
+        plot,
+        published=["objects.csv"],
+    )
 
 
 if __name__ == "__main__":

@@ -13,7 +13,6 @@ Writes studies/out/sky/{objects.csv, summary.json, sky.png}.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import _common as C
@@ -132,12 +131,7 @@ def main(argv=None, config: dict | None = None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = run(cfg, args.jobs)
-    C.write_table(out / "objects.csv", rows)
-    summary = {"config": cfg, "summary": summarise(rows)}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    plot(out)
-    C.publish(out, args.results, ["objects.csv", "summary.json", f"{NAME}.png"])
-    return summary
+    return C.finish(NAME, out, args.results, cfg, {"objects.csv": rows}, summarise(rows), plot)
 
 
 if __name__ == "__main__":
