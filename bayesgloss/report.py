@@ -15,7 +15,24 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["posterior_report"]
+__all__ = ["posterior_report", "save_png"]
+
+
+def save_png(fig, path, dpi: int = 120) -> Path:
+    """Save a figure as a 256-colour PNG (a fraction of an RGBA one's size) and close it."""
+    import io
+
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png")
+    plt.close(fig)
+    buf.seek(0)
+    path = Path(path)
+    with Image.open(buf) as im:
+        im.convert("RGB").quantize(colors=256).save(path, optimize=True)
+    return path
 
 
 def _tone_map(rgb: np.ndarray) -> np.ndarray:

@@ -18,7 +18,6 @@ Usage: python paper_figs/fig3.py [--results DIR] [--out DIR]
 from __future__ import annotations
 
 import argparse
-import io
 import json
 from pathlib import Path
 
@@ -27,9 +26,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from PIL import Image  # noqa: E402
 
-from bayesgloss import render, scene  # noqa: E402
+from bayesgloss import render, report, scene  # noqa: E402
 
 HERE = Path(__file__).parent
 GAMMAS = np.round(np.linspace(0.0, 1.0, 6), 1)
@@ -81,16 +79,6 @@ def _panel(ax, pred, exponent, title):
     ax.grid(alpha=0.3)
 
 
-def save_png(fig, path: Path, dpi: int = 120) -> None:
-    """Save as a 256-colour PNG (a fraction of the size of an RGBA one) and close."""
-    buf = io.BytesIO()
-    fig.savefig(buf, dpi=dpi, format="png")
-    plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as im:
-        im.convert("RGB").quantize(colors=256).save(path, optimize=True)
-
-
 def main(argv=None) -> Path:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--results", default=str(HERE / "results"), help="saved results folder")
@@ -114,7 +102,7 @@ def main(argv=None) -> Path:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "fig3.png"
-    save_png(fig, path)
+    report.save_png(fig, path)
     return path
 
 

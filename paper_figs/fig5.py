@@ -19,7 +19,6 @@ Usage: python paper_figs/fig5.py [--results DIR] [--out DIR]
 from __future__ import annotations
 
 import argparse
-import io
 import json
 from pathlib import Path
 
@@ -28,9 +27,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from PIL import Image  # noqa: E402
 
-from bayesgloss import render, scene  # noqa: E402
+from bayesgloss import render, report, scene  # noqa: E402
 
 HERE = Path(__file__).parent
 MATERIALS = (("0", "matt (spec 0)"), ("0.5", "intermediate (spec 0.5)"), ("1", "glossy (spec 1)"))
@@ -71,16 +69,6 @@ def _curves(ax, curves, labels, scale=1.0):
     _frames_axis(ax, curves.shape[1])
     ax.set_ylim(0, 1.35 * np.nanmax(curves) * scale)  # room for the legend
     ax.legend(fontsize=8, loc="upper left")
-
-
-def save_png(fig, path: Path, dpi: int = 120) -> None:
-    """Save as a 256-colour PNG (a fraction of the size of an RGBA one) and close."""
-    buf = io.BytesIO()
-    fig.savefig(buf, dpi=dpi, format="png")
-    plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as im:
-        im.convert("RGB").quantize(colors=256).save(path, optimize=True)
 
 
 def main(argv=None) -> Path:
@@ -147,7 +135,7 @@ def main(argv=None) -> Path:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "fig5.png"
-    save_png(fig, path)
+    report.save_png(fig, path)
     return path
 
 

@@ -17,7 +17,6 @@ Usage: python paper_figs/fig6.py [--results DIR] [--out DIR]
 from __future__ import annotations
 
 import argparse
-import io
 import json
 from pathlib import Path
 
@@ -28,7 +27,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from PIL import Image  # noqa: E402
+
+from bayesgloss import report  # noqa: E402
 
 HERE = Path(__file__).parent
 VIEWS = ("W", "SW", "S", "SE", "E")
@@ -68,16 +68,6 @@ def rule_range(results: Path, exponent: float) -> pd.DataFrame:
     return sens.pivot_table(
         index=["sky", "material", "specularity", "view"], columns="rule", values="object_gloss"
     )
-
-
-def save_png(fig, path: Path, dpi: int = 120) -> None:
-    """Save as a 256-colour PNG (a fraction of the size of an RGBA one) and close."""
-    buf = io.BytesIO()
-    fig.savefig(buf, dpi=dpi, format="png")
-    plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as im:
-        im.convert("RGB").quantize(colors=256).save(path, optimize=True)
 
 
 def _panel(ax, table, ranges, sky, material, title):
@@ -166,7 +156,7 @@ def main(argv=None) -> Path:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "fig6.png"
-    save_png(fig, path)
+    report.save_png(fig, path)
     return path
 
 
