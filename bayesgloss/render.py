@@ -187,9 +187,18 @@ def ground_shadow(points, sun_direction, occluder) -> np.ndarray:
 
 
 def _ground_points(center, directions):
-    """Where rays from points (F, 3) along downward directions (K, 3) meet z = 0, (F, K, 2)."""
-    reach = -center[:, None, 2:3] / directions[None, :, 2:3]
-    return center[:, None, :2] + reach * directions[None, :, :2]
+    """Where rays from points along downward directions meet z = 0, (..., 2).
+
+    ``center`` and ``directions`` (..., 3) broadcast against each other.
+    """
+    reach = -center[..., 2:3] / directions[..., 2:3]
+    return center[..., :2] + reach * directions[..., :2]
+
+
+def _sun_share_of_ground(sky, ground_reflectance: float) -> np.ndarray:
+    """The sun's part of the ground plane's radiance, rho_g E_sun,h / pi, (T,)."""
+    sun, e_sun = _sun_terms(sky)
+    return ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
 
 
 @functools.lru_cache(maxsize=8)
@@ -344,10 +353,11 @@ def diffuse_components(
         w_down = np.maximum(geometry.normal @ d6.T, 0.0) * (w6 / np.pi)  # (F, Kd)
         seen = np.any(w_down > 0, axis=1)
         if np.any(seen):
-            pts = _ground_points(geometry.center[seen], d6)
+            pts = _ground_points(geometry.center[seen][:, None, :], d6[None, :, :])
             shadow = ground_shadow(pts, sun, geometry.occluder)  # (Fs, Kd, T)
-            sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
-            sky_part[seen] -= np.einsum("fk,fkt->ft", w_down[seen], shadow) * sun_share
+            sky_part[seen] -= np.einsum("fk,fkt->ft", w_down[seen], shadow) * _sun_share_of_ground(
+                sky, ground_reflectance
+            )
     cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
     return sky_part, cos_i * e_sun / np.pi
 
@@ -461,7 +471,7 @@ def glossy_basis(
     if ground == "plane":
         l_ground = ground_plane_radiance(sky, ground_reflectance)
     sun, e_sun = _sun_terms(sky)
-    sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
+    sun_share = _sun_share_of_ground(sky, ground_reflectance)
     sun_radius = np.sqrt(sky.sun_solid_angle / np.pi)  # small-angle disc radius [rad]
 
     out = np.empty((len(normal), len(n), len(sun)))
@@ -485,9 +495,7 @@ def glossy_basis(
             if geometry.occluder is not None and np.any(down):
                 # nodes that see the object's shadow on the ground lose the sun's share
                 idx = np.nonzero(down)
-                c = geometry.center[sl][idx[0]]
-                m = dirs[idx]
-                pts = c[:, :2] - (c[:, 2:3] / m[:, 2:3]) * m[:, :2]
+                pts = _ground_points(geometry.center[sl][idx[0]], dirs[idx])
                 shadow = ground_shadow(pts, sun, geometry.occluder)  # (M, T)
                 radiance[idx] -= shadow * sun_share
         out[sl] = np.einsum("cnub,cnubt,cnu->cnt", h, radiance, weight[sl])
@@ -521,12 +529,9 @@ def mirror_radiance(
     )  # (F, T)
     down = mirror[:, 2] < 0
     if ground == "plane" and geometry.occluder is not None and np.any(down):
-        sun, e_sun = _sun_terms(sky)
-        c, m = geometry.center[down], mirror[down]
-        pts = c[:, :2] - (c[:, 2:3] / m[:, 2:3]) * m[:, :2]
-        shadow = ground_shadow(pts, sun, geometry.occluder)  # (Fd, T)
-        sun_share = ground_reflectance / np.pi * e_sun * np.maximum(sun[:, 2], 0.0)
-        radiance[down] -= shadow * sun_share
+        pts = _ground_points(geometry.center[down], mirror[down])
+        shadow = ground_shadow(pts, sky.sun_direction, geometry.occluder)  # (Fd, T)
+        radiance[down] -= shadow * _sun_share_of_ground(sky, ground_reflectance)
     sun = np.asarray(sky.sun_direction, dtype=float)
     cos_disc = np.cos(np.sqrt(sky.sun_solid_angle / np.pi))
     in_disc = (mirror @ sun.T) >= cos_disc
