@@ -136,21 +136,16 @@ class BatchedEnsemble:
         return chain, lps, acc.mean(axis=1) / max(n_steps, 1)
 
 
-def _autocorr_fft(x):
-    """Normalised autocorrelation along axis 0, for every trailing series."""
-    n = x.shape[0]
-    f = np.fft.rfft(x - x.mean(axis=0), n=2 * n, axis=0)
-    acf = np.fft.irfft(f * np.conj(f), axis=0)[:n]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return acf / acf[0]
-
-
 def integrated_time(chain, c: float = 5.0) -> np.ndarray:
     """Integrated autocorrelation time of ensemble chains (emcee's estimator).
 
-    The autocorrelation function is averaged over walkers (Goodman & Weare
-    2010, sec. 3) and summed up to Sokal's automatic window, the smallest M
-    with M >= c tau(M).
+    The normalised autocorrelation function is averaged over walkers
+    (Goodman & Weare 2010, sec. 3) and summed up to Sokal's automatic window,
+    the smallest M with M >= c tau(M). The average is taken over the
+    walkers' power spectra, each normalised by its series' sum of squares
+    (the autocovariance at lag 0), so that one inverse transform per
+    parameter gives the walker-mean of the normalised autocorrelation
+    functions exactly as emcee's per-walker ones would.
 
     Parameters
     ----------
@@ -162,64 +157,121 @@ def integrated_time(chain, c: float = 5.0) -> np.ndarray:
     ndarray (B, P)
         [steps]; NaN where a parameter does not move at all.
     """
-    x = np.asarray(chain, dtype=float)
-    acf = _autocorr_fft(x)
-    moving = np.isfinite(acf[0])  # walkers whose series varies, (B, W, P)
-    count = moving.sum(axis=1)  # (B, P)
+    x = np.moveaxis(np.asarray(chain, dtype=float), 0, -1)  # (B, W, P, N)
+    n = x.shape[-1]
+    x = x - x.mean(axis=-1, keepdims=True)
+    var = np.einsum("...i,...i->...", x, x)  # lag-0 autocovariance x N, (B, W, P)
+    moving = var > 0  # walkers whose series varies
+    f = np.fft.rfft(x, n=_fast_length(2 * n), axis=-1)
+    power = f.real**2 + f.imag**2
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = np.where(moving, acf, 0.0).sum(axis=2) / count  # walker mean, (N, B, P)
-    taus = 2.0 * np.cumsum(rho, axis=0) - 1.0
-    m = np.arange(len(taus))[:, None, None]
-    window = np.argmax(m >= c * taus, axis=0)  # first M with M >= c tau(M)
-    window = np.where(np.any(m >= c * taus, axis=0), window, len(taus) - 1)
-    return np.take_along_axis(taus, window[None], axis=0)[0]
+        power *= np.where(moving, 1.0 / np.where(moving, var, 1.0), 0.0)[..., None]
+        mean_power = power.sum(axis=1) / moving.sum(axis=1)[..., None]  # (B, P, F)
+        rho = np.fft.irfft(mean_power, axis=-1)[..., :n]  # mean normalised acf, (B, P, N)
+    taus = 2.0 * np.cumsum(rho, axis=-1) - 1.0
+    m = np.arange(n)
+    reached = m >= c * taus
+    window = np.where(np.any(reached, axis=-1), np.argmax(reached, axis=-1), n - 1)
+    return np.take_along_axis(taus, window[..., None], axis=-1)[..., 0]
+
+
+def _fast_length(n: int) -> int:
+    """The smallest 2^a 3^b 5^c >= n (fast FFT sizes)."""
+    best = 1 << (n - 1).bit_length()
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            p = p35
+            while p < n:
+                p *= 2
+            best = min(best, p)
+            p35 *= 3
+        p5 *= 5
+    return best
+
+
+def _node_fits(data: lk.CurveData, weights: bool = False):
+    """Weighted least squares of the curve on (D, G_n) at every exponent node.
+
+    mu = a D + b G_n with a, b >= 0 (the best single basis where the joint
+    fit leaves the quadrant), i.e. gamma = b / (a + b), s = a + b. Weights:
+    1 for gaussian noise; for relative noise 1 / (m + s f)^2, f the noise
+    floor at unit scale, with m the model curve of a first pass (weighted by
+    the diffuse curve at the prior centre of s), so that noisy or negative
+    observations cannot drive the weights.
+
+    Returns
+    -------
+    a, b, rms : ndarray (B, N)
+        Coefficients and the weighted rms residual (relative for relative noise).
+    w : ndarray (B, N, T)
+        The final weights (with ``weights=True``).
+    """
+    y, valid = data.y, data.valid
+    if data.camera == "power":
+        y = np.maximum(y, 0.0)  # start from g = 1: code values treated as linear
+    d = data.diffuse[:, None, :]
+    g = data.glossy  # (B, N, T)
+    floor = lk.FLOOR_FRACTION * data.diffuse_peak[:, None, None]
+    s0 = np.exp(data.log_s_center)[:, None, None]
+    if data.noise == "gaussian":
+        w = np.broadcast_to(valid[:, None, :].astype(float), g.shape)
+    else:
+        w = np.broadcast_to(
+            np.where(valid[:, None, :], 1.0 / (s0 * (d + floor)) ** 2, 0.0), g.shape
+        )
+    for _ in range(2 if data.noise != "gaussian" else 1):
+        a, b = _nonnegative_pair(y[:, None, :], d, g, w)
+        if data.noise != "gaussian":  # second pass: weights of the fitted curve
+            fit = (a + b > 0)[..., None]
+            s = np.where(fit, (a + b)[..., None], s0)
+            m = np.where(fit, a[..., None] * d + b[..., None] * g, s0 * d)
+            w = np.where(valid[:, None, :], 1.0 / (m + s * floor) ** 2, 0.0)
+    mu = a[..., None] * d + b[..., None] * g
+    n_valid = np.maximum(valid.sum(1), 1)[:, None]
+    rms = np.sqrt(np.sum(w * (y[:, None, :] - mu) ** 2, -1) / n_valid)
+    return (a, b, rms, w) if weights else (a, b, rms)
+
+
+def _nonnegative_pair(y, d, g, w):
+    """Weighted least squares y ~ a d + b g with a, b >= 0, closed form (last axis)."""
+    dd = np.sum(w * d * d, -1)
+    gg = np.sum(w * g * g, -1)
+    dg = np.sum(w * d * g, -1)
+    yd = np.sum(w * y * d, -1)
+    yg = np.sum(w * y * g, -1)
+    det = dd * gg - dg * dg
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (yd * gg - yg * dg) / det
+        b = (yg * dd - yd * dg) / det
+        a_only = np.maximum(yd / dd, 0.0)
+        b_only = np.maximum(yg / gg, 0.0)
+    a_only, b_only = np.nan_to_num(a_only), np.nan_to_num(b_only)
+    bad = ~np.isfinite(a) | ~np.isfinite(b) | (a < 0) | (b < 0)
+    sse_a = np.sum(w * (y - a_only[..., None] * d) ** 2, -1)
+    sse_b = np.sum(w * (y - b_only[..., None] * g) ** 2, -1)
+    pick_a = sse_a <= sse_b
+    a = np.where(bad, np.where(pick_a, a_only, 0.0), a)
+    b = np.where(bad, np.where(pick_a, 0.0, b_only), b)
+    return a, b
 
 
 def initial_ensemble(data: lk.CurveData, n_walkers: int, rng) -> np.ndarray:
     """Starting walkers (B, W, P) near the likelihood's optimum.
 
-    For each exponent on the basis grid, weighted least squares (weights for
-    relative noise, 1/y^2) gives mu = a D + b G_n with a, b >= 0, hence gamma =
-    b / (a + b) and s = a + b in closed form; walkers are spread over the
-    grid's exponents in proportion to the profile likelihood of n (so a
-    second mode in n is populated from the start), with a small ball in every
-    coordinate.
+    For each exponent on the basis grid, weighted least squares
+    (:func:`_node_fits`) gives gamma and s in closed form; walkers are spread
+    over the grid's exponents in proportion to the profile likelihood of n
+    (so that a second mode in n is populated from the start), with a small
+    ball in every coordinate. A fit with no positive scale (a curve of pure
+    noise) starts from the prior centre of s.
     """
-    y, valid = data.y, data.valid
-    d = data.diffuse
-    g = data.glossy  # (B, N, T)
-    if data.camera == "power":
-        y = np.maximum(y, 0.0)  # start from g = 1: code values treated as linear
-    if data.noise == "gaussian":
-        w = valid.astype(float)
-    else:  # relative noise: weights 1 / y^2, floored at 0.1 % of the peak
-        ymax = np.abs(y).max(axis=1, keepdims=True)
-        w = np.where(valid, 1.0 / np.maximum(np.abs(y), 1e-12 + 1e-3 * ymax) ** 2, 0.0)
-    w = w[:, None, :]
-    dd = np.sum(w * d[:, None, :] ** 2, -1)
-    gg = np.sum(w * g * g, -1)
-    dg = np.sum(w * d[:, None, :] * g, -1)
-    yd = np.sum(w * y[:, None, :] * d[:, None, :], -1)
-    yg = np.sum(w * y[:, None, :] * g, -1)
-    det = dd * gg - dg * dg
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = (yd * gg - yg * dg) / det
-        bb = (yg * dd - yd * dg) / det
-        # clip to the feasible quadrant: fall back to single-basis fits
-        a_only = np.maximum(yd / dd, 0.0)
-        b_only = np.maximum(yg / gg, 0.0)
-    bad = ~np.isfinite(a) | ~np.isfinite(bb) | (a < 0) | (bb < 0)
-    sse_a = np.sum(w * (y[:, None, :] - a_only[..., None] * d[:, None, :]) ** 2, -1)
-    sse_b = np.sum(w * (y[:, None, :] - b_only[..., None] * g) ** 2, -1)
-    pick_a = sse_a <= sse_b
-    a = np.where(bad, np.where(pick_a, a_only, 0.0), a)
-    bb = np.where(bad, np.where(pick_a, 0.0, b_only), bb)
-    s = np.maximum(a + bb, 1e-300)
-    gamma = np.clip(bb / s, 0.0, 1.0)
-    mu = a[..., None] * d[:, None, :] + bb[..., None] * g
-    n_valid = np.maximum(valid.sum(1), 1)[:, None]
-    sse = np.sum(w * (y[:, None, :] - mu) ** 2, -1)
-    rms = np.sqrt(sse / n_valid)  # relative rms for relative noise
+    a, bb, rms = _node_fits(data)
+    s_fit = a + bb
+    s = np.where(s_fit > 0, s_fit, np.exp(data.log_s_center)[:, None])
+    gamma = np.where(s_fit > 0, np.clip(bb / np.maximum(s_fit, 1e-300), 0.0, 1.0), 0.5)
+    n_valid = np.maximum(data.valid.sum(1), 1)[:, None]
     if data.noise == "gaussian":
         sig = np.maximum(rms, 1e-12)
     else:
@@ -229,7 +281,7 @@ def initial_ensemble(data: lk.CurveData, n_walkers: int, rng) -> np.ndarray:
     profile = -n_valid * np.log(np.maximum(sig, 1e-300))  # (B, N)
     prob = np.exp(profile - profile.max(1, keepdims=True))
     prob /= prob.sum(1, keepdims=True)
-    b_count = len(y)
+    b_count = len(data.y)
     cum = np.cumsum(prob, axis=1)
     u = rng.random((b_count, n_walkers))
     node = np.minimum((u[..., None] > cum[:, None, :]).sum(-1), prob.shape[1] - 1)  # (B, W)
@@ -253,6 +305,145 @@ def initial_ensemble(data: lk.CurveData, n_walkers: int, rng) -> np.ndarray:
         th[..., 3], data.priors.log_sigma[0] + 1e-6, data.priors.log_sigma[1] - 1e-6
     )
     return th
+
+
+RIDGE_MAX_RMS = 0.05
+
+
+@dataclass(frozen=True)
+class RidgeCoordinates:
+    """Sampling coordinates that straighten a facet's posterior ridge.
+
+    With little noise, gamma and s are known to a fraction of a percent at
+    each exponent n but shift with n: the posterior is a thin curved ridge
+    along log n, which the affine-invariant moves cross slowly (integrated
+    autocorrelation times of hundreds of steps). Writing the curve as
+    mu = a D + b G(n), a = s (1 - gamma), b = s gamma, and, at each node of
+    the exponent grid, (a, b) = c(n) + L(n) (u1, u2) with c(n) the weighted
+    least-squares fit and L(n) the Cholesky factor of its covariance (at the
+    best node's residual scale, the same for every n, and a weak ridge of
+    sd s0 on a and b), both interpolated linearly in log n, gives
+    coordinates x = (log n, u1, u2) in which that ridge is straight and of
+    constant width. The map is exact and its Jacobian is carried:
+
+        log p(x) = log p(theta) + log |L11 L22| - 2 log s,
+
+    (d(gamma, log s) / d(a, b) has determinant -1 / s^2). Further
+    coordinates (log sigma, log g) pass through unchanged. Facets whose best
+    fit leaves a relative rms above ``max_rms`` (prior-dominated, broad
+    posteriors, where the plain coordinates mix better) keep the plain
+    coordinates x = theta; so do curves with a non-linear camera.
+
+    Attributes
+    ----------
+    log_n_grid : ndarray (N,)
+    center : ndarray (B, N, 2)
+        c(n) at the nodes.
+    factor : ndarray (B, N, 3)
+        L11, L21, L22 at the nodes.
+    active : ndarray (B,) of bool
+        Facets sampled in ridge coordinates.
+    """
+
+    log_n_grid: np.ndarray
+    center: np.ndarray
+    factor: np.ndarray
+    active: np.ndarray
+
+    @classmethod
+    def of(cls, data: lk.CurveData, max_rms: float = RIDGE_MAX_RMS) -> RidgeCoordinates:
+        """Coordinates for every facet of ``data`` (:func:`_node_fits` at each node)."""
+        a, b, rms, w = _node_fits(data, weights=True)
+        y = data.y[:, None, :]
+        d, g = data.diffuse[:, None, :], data.glossy
+        dd, gg, dg = np.sum(w * d * d, -1), np.sum(w * g * g, -1), np.sum(w * d * g, -1)
+        yd, yg = np.sum(w * y * d, -1), np.sum(w * y * g, -1)
+        best = np.argmin(rms, axis=1)[:, None]
+        r2 = np.maximum(np.take_along_axis(rms, best, 1) ** 2, 1e-24)  # (B, 1)
+        s0 = np.take_along_axis(a + b, best, 1)
+        s0 = np.where(s0 > 0, s0, np.exp(data.log_s_center)[:, None])
+        i11, i22, i12 = dd / r2 + s0**-2, gg / r2 + s0**-2, dg / r2
+        det = i11 * i22 - i12 * i12
+        c11, c22, c12 = i22 / det, i11 / det, -i12 / det  # covariance of (a, b)
+        center = np.stack([c11 * yd + c12 * yg, c12 * yd + c22 * yg], axis=-1) / r2[..., None]
+        l11 = np.sqrt(c11)
+        l21 = c12 / l11
+        l22 = np.sqrt(np.maximum(c22 - l21 * l21, 1e-30 * c22))
+        factor = np.stack([l11, l21, l22], axis=-1)
+        active = (
+            (np.sqrt(r2[:, 0]) < max_rms)
+            & np.all(np.isfinite(center), axis=(1, 2))
+            & np.all(np.isfinite(factor) & (factor[..., [0, 2]] > 0).all(-1)[..., None], (1, 2))
+        )
+        if data.camera != "linear":
+            active[:] = False
+        return cls(np.asarray(data.log_n_grid), center, factor, active)
+
+    def take(self, index) -> RidgeCoordinates:
+        idx = np.asarray(index)
+        return RidgeCoordinates(
+            self.log_n_grid, self.center[idx], self.factor[idx], self.active[idx]
+        )
+
+    def _at(self, log_n):
+        """c and L interpolated at log n (B, K): (B, K, 2), (B, K, 3)."""
+        grid = self.log_n_grid
+        n = len(grid)
+        b, k = log_n.shape
+        pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
+        j = pos.astype(np.intp)
+        w = (pos - j)[..., None]
+        rows = (j + (np.arange(b) * n)[:, None]).ravel()
+        c = self.center.reshape(-1, 2)
+        f = self.factor.reshape(-1, 3)
+        c0, c1 = np.take(c, rows, 0).reshape(b, k, 2), np.take(c, rows + 1, 0).reshape(b, k, 2)
+        f0, f1 = np.take(f, rows, 0).reshape(b, k, 3), np.take(f, rows + 1, 0).reshape(b, k, 3)
+        return c0 + w * (c1 - c0), f0 + w * (f1 - f0)
+
+    def to_theta(self, x):
+        """theta (B, K, P) and log |d theta / d x| (B, K) at x (B, K, P);
+        -inf Jacobian where x maps to no scale s > 0."""
+        x = np.asarray(x, dtype=float)
+        c, f = self._at(x[..., 0])
+        a = c[..., 0] + f[..., 0] * x[..., 1]
+        b = c[..., 1] + f[..., 1] * x[..., 1] + f[..., 2] * x[..., 2]
+        s = a + b
+        ok = s > 0
+        s = np.where(ok, s, 1.0)
+        act = self.active[:, None]
+        th = x.copy()
+        th[..., 0] = np.where(act, np.where(ok, b / s, -1.0), x[..., 0])
+        th[..., 1] = np.where(act, x[..., 0], x[..., 1])
+        th[..., 2] = np.where(act, np.log(s), x[..., 2])
+        log_jac = np.log(f[..., 0]) + np.log(f[..., 2]) - 2.0 * th[..., 2]
+        log_jac = np.where(ok, log_jac, -np.inf)
+        return th, np.where(act, log_jac, 0.0)
+
+    def from_theta(self, theta):
+        """x (B, K, P) at theta (B, K, P) (the inverse of :meth:`to_theta`)."""
+        th = np.asarray(theta, dtype=float)
+        c, f = self._at(th[..., 1])
+        s = np.exp(th[..., 2])
+        a, b = s * (1.0 - th[..., 0]), s * th[..., 0]
+        u1 = (a - c[..., 0]) / f[..., 0]
+        u2 = (b - c[..., 1] - f[..., 1] * u1) / f[..., 2]
+        act = self.active[:, None]
+        x = th.copy()
+        x[..., 0] = np.where(act, th[..., 1], th[..., 0])
+        x[..., 1] = np.where(act, u1, th[..., 1])
+        x[..., 2] = np.where(act, u2, th[..., 2])
+        return x
+
+    def log_prob(self, log_prob, data: lk.CurveData):
+        """The log density in these coordinates of a density ``log_prob(theta, data)``."""
+
+        def in_x(x):
+            th, log_jac = self.to_theta(x)
+            with np.errstate(invalid="ignore"):
+                out = log_prob(th, data) + log_jac
+            return np.where(np.isnan(out), -np.inf, out)
+
+        return in_x
 
 
 @dataclass
@@ -295,6 +486,8 @@ def sample_posterior(
     jobs: int = 1,
     stream_size: int = 600,
     slots: int = 128,
+    marginalise_sigma: bool = True,
+    ridge: float | None = RIDGE_MAX_RMS,
     progress=None,
 ) -> PosteriorSamples:
     """Sample every facet's posterior with the batched ensemble sampler.
@@ -325,26 +518,39 @@ def sample_posterior(
         Production steps at most (facets that need more are returned as run
         and the diagnostics flag them).
     draws_per_ensemble : int
-        Draws kept per ensemble: every walker's trajectory thinned evenly.
-
-    Notes
-    -----
-    A facet stops when its production run is at least ``min_tau_multiple``
-    integrated autocorrelation times of every parameter in every ensemble
-    and ArviZ finds gamma converged across the ensembles (R-hat < 1.01, bulk
-    and tail ESS >= 400), or at ``max_steps``.
+        Draws kept per ensemble (rounded down to a multiple of the walkers):
+        every walker's trajectory thinned evenly.
     moves : sequence of (name, weight)
     seed : int or None
     jobs : int
         Worker processes.
     stream_size, slots : int
         Facets per stream, and facets sampled at once within a stream.
+    marginalise_sigma : bool
+        Where the likelihood allows it
+        (:func:`bayesgloss.likelihood.sigma_marginal_supported`), sample
+        (gamma, log n, log s) from the posterior with sigma integrated out
+        exactly, and draw log sigma for every kept draw from its conditional
+        posterior (:func:`bayesgloss.likelihood.draw_log_sigma`): one
+        dimension fewer for the ensembles, the same joint posterior. The
+        autocorrelation time of log sigma is then reported as NaN.
+    ridge : float or None
+        Sample facets whose best fit leaves a relative rms below this in
+        :class:`RidgeCoordinates` (None: plain coordinates for all).
     progress : callable, optional
         Called with (facets done, facets in all) as streams finish.
+
+    Notes
+    -----
+    A facet stops when its production run is at least ``min_tau_multiple``
+    integrated autocorrelation times of every sampled parameter in every
+    ensemble and ArviZ finds gamma converged across the ensembles (R-hat <
+    1.01, bulk and tail ESS >= 400), or at ``max_steps``.
     """
     t0 = time.perf_counter()
     n_f = len(data.y)
-    p = data.n_params
+    marginal = marginalise_sigma and lk.sigma_marginal_supported(data)
+    p = 3 if marginal else data.n_params  # dimensions the ensembles explore
     walkers = 2 * p if n_walkers is None else int(n_walkers)
     n_streams = max(1, -(-n_f // stream_size))
     bounds = np.linspace(0, n_f, n_streams + 1).round().astype(int)
@@ -359,6 +565,8 @@ def sample_posterior(
         draws_per_ensemble=draws_per_ensemble,
         moves=moves,
         slots=slots,
+        marginal=marginal,
+        ridge=ridge,
     )
     tasks = [
         (i, data.take(np.arange(bounds[i], bounds[i + 1])), seeds[i]) for i in range(n_streams)
@@ -400,11 +608,16 @@ def _sample_stream(
     draws_per_ensemble,
     moves,
     slots,
+    marginal,
+    ridge,
 ):
     """One stream of facets through ``slots`` places, E ensembles each (see above)."""
     rng = np.random.default_rng(seed_seq)
-    n_f, e, p = len(data.y), n_ensembles, data.n_params
+    n_f, e, p = len(data.y), n_ensembles, (3 if marginal else data.n_params)
+    log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
+    coords_of = RidgeCoordinates.of(data, max_rms=ridge if ridge else -1.0)
     burn_chunks = -(-burn // chunk)
+    draws_per_ensemble = n_walkers * max(1, draws_per_ensemble // n_walkers)
     out = np.empty((n_f, e, draws_per_ensemble, p))
     tau_out = np.full((n_f, e, p), np.nan)
     steps_out = np.zeros(n_f, dtype=int)
@@ -419,51 +632,74 @@ def _sample_stream(
     thin = 2  # stored chains keep every 2nd step (tau >> 2 steps here)
     kept: dict[int, list[np.ndarray]] = {}
     acc_sum = np.empty((0, e))
+    # no posterior here mixes in under 10 steps: first look at 10 x the multiple
+    first_check = max(chunk, 10.0 * min_tau_multiple)
     sampler = BatchedEnsemble(None, moves, rng)
     while waiting or facets:
         # fill free places with waiting facets
         new = waiting[: max(0, slots - len(facets))]
         waiting = waiting[len(new) :]
         if new:
-            sub = data.take(np.repeat(new, e))
-            start = initial_ensemble(sub, n_walkers, rng)
+            rows = np.repeat(new, e)
+            sub = data.take(rows)
+            start = initial_ensemble(sub, n_walkers, rng)[..., :p]
+            x = coords_of.take(rows).from_theta(start)
+            lp = coords_of.take(rows).log_prob(log_prob, sub)(x)
+            # a start the ridge map cannot represent: that facet keeps plain coordinates
+            lost = np.any(~np.isfinite(lp) & np.isfinite(log_prob(start, sub)), axis=1)
+            if np.any(lost):
+                coords_of.active[np.unique(rows[lost])] = False
+                x = coords_of.take(rows).from_theta(start)
+                lp = coords_of.take(rows).log_prob(log_prob, sub)(x)
             facets += new
-            coords = np.concatenate([coords, start])
-            logp = np.concatenate([logp, lk.log_probability(start, sub)])
+            coords = np.concatenate([coords, x])
+            logp = np.concatenate([logp, lp])
             age = np.concatenate([age, np.zeros(len(new), dtype=int)])
-            next_check = np.concatenate([next_check, np.full(len(new), 10.0 * chunk)])
+            next_check = np.concatenate([next_check, np.full(len(new), first_check)])
             acc_sum = np.concatenate([acc_sum, np.zeros((len(new), e))])
             for f in new:
                 kept[f] = []
-        batch = data.take(np.repeat(facets, e))
-        sampler.log_prob = lambda th, batch=batch: lk.log_probability(th, batch)
+        rows = np.repeat(facets, e)
+        batch_coords = coords_of.take(rows)
+        sampler.log_prob = batch_coords.log_prob(log_prob, data.take(rows))
         ch, lp, acc = sampler.run(coords, chunk, logp)
         coords, logp = ch[-1].copy(), lp[-1].copy()
         age += 1
         a = len(facets)
-        ch = ch.reshape(chunk, a, e, n_walkers, p)
+        kept_steps = ch[::thin]  # sampling coordinates to parameters, (n, a E, W, P)
+        n_kept = len(kept_steps)
+        th = batch_coords.to_theta(
+            kept_steps.transpose(1, 0, 2, 3).reshape(a * e, n_kept * n_walkers, p)
+        )[0]
+        ch = th.reshape(a * e, n_kept, n_walkers, p).transpose(1, 0, 2, 3)
+        ch = ch.reshape(n_kept, a, e, n_walkers, p)
         acc = acc.reshape(a, e)
         finished = np.zeros(a, dtype=bool)
         for k, f in enumerate(facets):
             if age[k] <= burn_chunks:
                 continue
-            kept[f].append(ch[::thin, k].astype(np.float32))
+            kept[f].append(ch[:, k].astype(np.float32))
             acc_sum[k] += acc[k]
             n_steps = (age[k] - burn_chunks) * chunk
             if n_steps < next_check[k] and n_steps < max_steps:
                 continue
             run = np.concatenate(kept[f])  # (N / thin, E, W, P)
-            t = thin * integrated_time(run)  # ensembles as problems: (E, P) [steps]
+            # one autocorrelation function averaged over the walkers of every
+            # ensemble (the same sampler on the same target): (P,) [steps]
+            t = thin * integrated_time(run.reshape(len(run), 1, e * n_walkers, p))[0]
             need = np.nan_to_num(t, nan=np.inf).max() * min_tau_multiple
             draws = _ensemble_draws(run, draws_per_ensemble)  # (E, S, P)
-            if (n_steps >= need and _gamma_converged(draws[..., 0])) or n_steps >= max_steps:
+            enough = n_steps >= need
+            if (enough and _gamma_converged(draws[..., 0])) or n_steps >= max_steps:
                 out[f] = draws
                 tau_out[f], steps_out[f] = t, n_steps
                 acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
                 del kept[f]
                 finished[k] = True
-            else:  # check again when the estimate says it may be enough, or 50 % later
-                next_check[k] = max(need, 1.5 * n_steps)
+            elif enough:  # long enough but not yet converged: 25 % more steps
+                next_check[k] = n_steps + max(chunk, 0.25 * n_steps)
+            else:  # check again when the estimate says it may be enough
+                next_check[k] = max(need, n_steps + chunk)
         if np.any(finished):
             keep_places = ~finished
             facets = [f for f, k in zip(facets, keep_places, strict=True) if k]
@@ -471,6 +707,11 @@ def _sample_stream(
             coords, logp = coords[rows], logp[rows]
             age, acc_sum = age[keep_places], acc_sum[keep_places]
             next_check = next_check[keep_places]
+    if marginal:  # log sigma from its conditional posterior at every kept draw
+        th = out.reshape(n_f, e * draws_per_ensemble, p)
+        log_sigma = lk.draw_log_sigma(th, data, rng).reshape(n_f, e, draws_per_ensemble, 1)
+        out = np.concatenate([out, log_sigma], axis=-1)
+        tau_out = np.concatenate([tau_out, np.full((n_f, e, 1), np.nan)], axis=-1)
     return out, tau_out, steps_out, acc_out
 
 

@@ -30,7 +30,7 @@ from bayesgloss import render, sampling, scene
 
 logging.getLogger("emcee").setLevel(logging.ERROR)  # its short-chain warnings, every check
 
-CONFIG = {"seed": 2026, "walkers": 8, "ensembles": 4, "burn": 300, "tau_multiple": 50}
+CONFIG = {"seed": 2026, "walkers": None, "ensembles": 4, "burn": 300, "tau_multiple": 50}
 
 
 def facet_set(n: int, seed: int):
@@ -62,7 +62,11 @@ def facet_set(n: int, seed: int):
 
 def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
     """One facet with stock emcee: E samplers run to the same stopping rule."""
-    p, w, e = data.n_params, CONFIG["walkers"], CONFIG["ensembles"]
+    # the same target as the batched sampler: sigma integrated out where possible
+    marginal = lk.sigma_marginal_supported(data)
+    log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
+    p = 3 if marginal else data.n_params
+    w, e = CONFIG["walkers"] or 2 * p, CONFIG["ensembles"]
     rng = np.random.default_rng(seed)
     moves = [
         (emcee.moves.StretchMove(), 0.2),
@@ -71,9 +75,9 @@ def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
     ]
     samplers = []
     for k in range(e):
-        start = sampling.initial_ensemble(data, w, rng)[0]
+        start = sampling.initial_ensemble(data, w, rng)[0, :, :p]
         s = emcee.EnsembleSampler(
-            w, p, lambda th: lk.log_probability(th[None], data)[0], vectorize=True, moves=moves
+            w, p, lambda th: log_prob(th[None], data)[0], vectorize=True, moves=moves
         )
         s.random_state = np.random.RandomState(seed * 10 + k).get_state()
         s.run_mcmc(start, CONFIG["burn"])
