@@ -10,22 +10,27 @@ and a rerun skips them: nothing finished is recomputed, nothing is lost.
 Executors (:func:`executor`): ``jobs`` local processes
 (:class:`concurrent.futures.ProcessPoolExecutor`), or, given a scheduler
 address, a Dask distributed cluster through ``Client.get_executor()``
-(the ``cluster`` extra: ``pip install bayesgloss[cluster]``).
+(the ``cluster`` extra: ``pip install bayesgloss[cluster]``). Units defined
+in a script rather than in the package (the studies) run through
+:func:`script_unit`, which workers can unpickle without the script on their
+import path.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib.util
 import json
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-__all__ = ["executor", "unit_key", "run_units", "estimate_unit"]
+__all__ = ["executor", "unit_key", "run_units", "script_unit", "estimate_unit"]
 
 
 @contextlib.contextmanager
@@ -124,6 +129,46 @@ def run_units(
                 if progress:
                     progress(done, len(units))
     return folders
+
+
+def script_unit(script: str, function: str, /, **options) -> dict[str, bytes]:
+    """Call ``function(**options)`` of the Python file ``script``, on any worker.
+
+    A function defined in a script (``python studies/study_noise.py``) is
+    pickled by reference to a module that a Dask worker, or a process
+    started by ``spawn``, cannot import. Pass
+    ``functools.partial(script_unit, script, function)`` to
+    :func:`run_units` instead: this function is importable everywhere the
+    package is, and it imports the script by its path (once per process),
+    with the script's folder on ``sys.path`` as when the script is run, so
+    its sibling modules import too. Workers must see the script's path
+    (the same machine, or a shared file system).
+
+    Parameters
+    ----------
+    script : str
+        Path of the Python file.
+    function : str
+        Name of a function of the file returning ``{file name: bytes}``.
+    **options
+        The unit's options, passed on.
+    """
+    path = Path(script).resolve()
+    module = sys.modules.get(path.stem)
+    if module is None or Path(getattr(module, "__file__", "") or "").resolve() != path:
+        if str(path.parent) not in sys.path:
+            sys.path.insert(0, str(path.parent))
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        if spec is None or spec.loader is None:
+            raise ValueError(f"cannot import a Python module from {script!r}")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[path.stem] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[path.stem]
+            raise
+    return getattr(module, function)(**options)
 
 
 def estimate_unit(

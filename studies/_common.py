@@ -7,6 +7,17 @@ facets of the paper hemisphere made of one material (gamma, n), and puts the
 posterior object gloss (the hierarchical population mean of
 :func:`bayesgloss.estimate.population_gloss`) beside the paper's peak-frame
 baseline (mean over sunlit facets, :func:`bayesgloss.baseline.peak_frame_gloss`).
+
+Every study cuts its work into units (one object, or a few fitted together)
+that :func:`bayesgloss.runner.run_units` runs on local processes (``--jobs``)
+or a Dask cluster (``--scheduler``) into ``<out>/units/``, one folder per
+finished unit, written atomically: a killed run restarted recomputes
+nothing that finished. A unit is a pure function of its options (the
+config without the lists the study is cut along, and the unit's own cell)
+and draws its random numbers from :func:`unit_seed` (the config's seed and
+the unit's labels), so the numbers depend neither on ``--jobs``, nor on the
+executor, nor on the order in which units run. The tables are gathered from
+the unit folders in the config's order.
 """
 
 from __future__ import annotations
@@ -14,14 +25,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import hashlib
 import json
+import re
 import shutil
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from bayesgloss import baseline, estimate, render, sampling, scene, sky, sun
+from bayesgloss import baseline, estimate, render, runner, sampling, scene, sky, sun
 from bayesgloss import likelihood as lk
 
 STUDIES = Path(__file__).resolve().parent
@@ -45,7 +59,14 @@ def load_config(name: str, quick: bool = False, override: dict | None = None) ->
 def parse_args(name: str, argv=None, doc: str = "") -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=doc.splitlines()[0] if doc else name)
     ap.add_argument("--quick", action="store_true", help="the config's tiny test-size run")
-    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2, help="local worker processes (default 2)")
+    ap.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the units on this Dask distributed scheduler (tcp://host:8786) "
+        "instead of local processes; the numbers are the same",
+    )
     ap.add_argument("--out", default=str(STUDIES / "out" / name))
     ap.add_argument(
         "--results",
@@ -67,6 +88,74 @@ def publish(out: Path, results: str | None, files) -> None:
     dest.mkdir(parents=True, exist_ok=True)
     for f in files:
         shutil.copy2(out / f, dest / f)
+
+
+def unit_seed(seed: int, *labels) -> np.random.SeedSequence:
+    """The seed of one unit of work: the config's ``seed`` and the unit's
+    ``labels`` (numbers and strings naming it, e.g. ``"data", 0.5, 0.01``),
+    hashed, never the order in which units run."""
+    text = json.dumps([seed, *labels], default=str)
+    words = np.frombuffer(hashlib.sha256(text.encode()).digest(), dtype="<u4")
+    return np.random.SeedSequence([int(seed), *map(int, words)])
+
+
+def seed_int(seed: np.random.SeedSequence) -> int:
+    """An integer seed drawn from a seed sequence (for functions taking ints)."""
+    return int(seed.generate_state(1, np.uint64)[0])
+
+
+def unit_name(study: str, *labels) -> str:
+    """A readable unit folder name (:func:`bayesgloss.runner.unit_key` adds a hash)."""
+    return "-".join([study, *(re.sub(r"[^A-Za-z0-9.]+", "_", str(x)) for x in labels)])
+
+
+def unit_options(cfg: dict, axes, **cell) -> dict:
+    """A unit's options: ``cfg`` without the entries ``axes`` the study is cut
+    along, and the unit's own ``cell``. Adding a condition to a config thus
+    leaves the other units' folders (and numbers) as they were."""
+    return {"cfg": {k: v for k, v in cfg.items() if k not in axes}, **cell}
+
+
+def _plain(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable: {value!r}")
+
+
+def unit_files(tables: dict[str, list[dict]]) -> dict[str, bytes]:
+    """A unit's result: its rows of each table (``{"objects.csv": [row, ...]}``)
+    as ``rows.json`` (floats written exactly)."""
+    return {"rows.json": json.dumps(tables, default=_plain).encode()}
+
+
+def run_units(name: str, units: list[tuple[str, dict]], out: Path, args, **fixed) -> dict:
+    """Run the study's ``unit(**options)`` for every unit not finished under
+    ``out/units/`` (:func:`bayesgloss.runner.run_units`, ``args.jobs`` local
+    processes or ``args.scheduler``), then gather each table's rows from the
+    unit folders in the order of ``units``.
+
+    ``fixed`` are further keyword arguments of every unit that do not change
+    its numbers (a cache folder): they are not part of the units' keys.
+
+    Returns
+    -------
+    dict
+        ``{table file name: rows}``.
+    """
+    func = functools.partial(runner.script_unit, str(STUDIES / f"study_{name}.py"), "unit", **fixed)
+
+    def progress(done: int, total: int) -> None:
+        print(f"\r{name}: {done}/{total} units", end="", file=sys.stderr, flush=True)
+
+    folders = runner.run_units(
+        func, units, out / "units", jobs=args.jobs, scheduler=args.scheduler, progress=progress
+    )
+    print(file=sys.stderr)
+    tables: dict[str, list[dict]] = {}
+    for folder in folders:
+        for table, rows in json.loads((folder / "rows.json").read_text()).items():
+            tables.setdefault(table, []).extend(rows)
+    return tables
 
 
 @dataclass(frozen=True)
@@ -163,9 +252,11 @@ class Fit:
     converged: float  # fraction of facets that met the sampler's stopping rule
 
 
-def fit_groups(groups, cfg: dict, jobs: int = 2, camera: str = "linear") -> list[Fit]:
-    """Posterior of every facet of every group in one batched sampler call,
-    then the object's gloss per group.
+def fit_groups(
+    groups, cfg: dict, seed: np.random.SeedSequence, camera: str = "linear"
+) -> list[Fit]:
+    """Posterior of every facet of every group in one batched sampler call
+    (one process, one stream), then the object's gloss per group.
 
     Parameters
     ----------
@@ -173,8 +264,13 @@ def fit_groups(groups, cfg: dict, jobs: int = 2, camera: str = "linear") -> list
         ``y`` (F, T), ``valid`` (F, T), ``bases`` (FacetBases), optional
         ``censored`` (F, T).
     cfg : dict
-        The study config: ``seed``, ``sampler`` (keyword arguments of
+        The study config: ``sampler`` (keyword arguments of
         :func:`bayesgloss.sampling.sample_posterior`) and ``population_draws``.
+    seed : numpy.random.SeedSequence
+        The unit's seed (:func:`unit_seed`): the sampler and each group's
+        population draws get children of it.
+    camera : str
+        The likelihood's camera model.
     """
     if not groups:
         return []
@@ -190,18 +286,17 @@ def fit_groups(groups, cfg: dict, jobs: int = 2, camera: str = "linear") -> list
     data = lk.curve_data(y, valid, bases, censored=cens, camera=camera)
     opts = dict(cfg.get("sampler", {}))
     n = len(y)
-    # two streams whatever --jobs is, so the numbers never depend on the job count
-    # (the sampler's streams are fixed by their size; jobs only spreads them)
-    opts.setdefault("stream_size", max(8, -(-n // 2)))
-    samples = sampling.sample_posterior(data, seed=cfg["seed"], jobs=jobs, **opts)
+    opts.setdefault("stream_size", n)  # one stream: the unit's facets batched together
+    fit_seed, *pop_seeds = seed.spawn(1 + len(groups))
+    samples = sampling.sample_posterior(data, seed=seed_int(fit_seed), jobs=1, **opts)
     gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
     max_steps = opts.get("max_steps", 8000)
     conv = samples.n_steps < max_steps
     out, lo = [], 0
-    for k, g in enumerate(groups):
+    for g, pop_seed in zip(groups, pop_seeds, strict=True):
         hi = lo + len(g["y"])
         pop = estimate.population_gloss(
-            gam[lo:hi], seed=cfg["seed"] + k, max_draws=cfg.get("population_draws", 200)
+            gam[lo:hi], seed=seed_int(pop_seed), max_draws=cfg.get("population_draws", 200)
         )["mu"]
         q = np.quantile(gam[lo:hi], [0.05, 0.5, 0.95], axis=1)
         out.append(

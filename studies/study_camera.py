@@ -14,8 +14,9 @@ and quantised to 8, 10 or 12 bits. Three ways to estimate from the codes:
 
 The baseline sees the codes (only the frame of the peak matters to it).
 
-Usage: python studies/study_camera.py [--quick] [--jobs 2] [--out DIR]
-Writes studies/out/camera/{objects.csv, summary.json, camera.png}.
+Usage: python studies/study_camera.py [--quick] [--jobs 2 | --scheduler ADDRESS] [--out DIR]
+Writes studies/out/camera/{objects.csv, summary.json, camera.png} and one
+folder per (gamma, camera) under units/ (a rerun skips them).
 """
 
 from __future__ import annotations
@@ -54,54 +55,65 @@ def camera_codes(y, valid, cond):
     return codes, (codes >= 1.0) & valid
 
 
-def run(cfg: dict, jobs: int) -> list[dict]:
+#: Config entries the study is cut along: one unit per (gamma, condition), all methods.
+AXES = ("gammas", "conditions")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the table's order."""
+    return [
+        (
+            C.unit_name(NAME, f"g{gamma:g}", cond["label"]),
+            C.unit_options(cfg, AXES, gamma=gamma, cond=cond),
+        )
+        for gamma in cfg["gammas"]
+        for cond in cfg["conditions"]
+    ]
+
+
+def unit(cfg: dict, gamma: float, cond: dict) -> dict[str, bytes]:
+    """One object of one material seen by one camera, estimated every way of
+    ``methods`` (the linear ones in one sampler call): its ``objects.csv`` row.
+
+    The linear curves are drawn from a seed of gamma alone, so every camera
+    sees the same noisy curves of one material (a paired comparison)."""
     idx = C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"])
     sc = C.paper_scene(cfg["view"], cfg["sky"], tuple(idx))
-    rng = np.random.default_rng(cfg["seed"])
-    cells = []
-    groups = {m: [] for m in cfg["methods"]}
-    for gamma in cfg["gammas"]:
-        y_lin = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
-        for cond in cfg["conditions"]:
-            codes, top = camera_codes(y_lin, sc.valid, cond)
-            cells.append((gamma, cond, C.baseline_fit(sc, codes), float(top.mean())))
-            if "ignored" in groups:
-                groups["ignored"].append({"y": codes, "valid": sc.valid, "bases": sc.bases})
-            if "modelled" in groups:
-                groups["modelled"].append(
-                    {"y": codes, "valid": sc.valid, "bases": sc.bases, "censored": top}
-                )
-            if "undone" in groups:
-                groups["undone"].append(
-                    {
-                        "y": decode(codes, cond["response"]),
-                        "valid": sc.valid,
-                        "bases": sc.bases,
-                        "censored": top,
-                    }
-                )
-    fits = {
-        m: C.fit_groups(g, cfg, jobs, camera="power" if m == "modelled" else "linear")
-        for m, g in groups.items()
+    rng = np.random.default_rng(C.unit_seed(cfg["seed"], "data", gamma))
+    y_lin = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
+    codes, top = camera_codes(y_lin, sc.valid, cond)
+    base = C.baseline_fit(sc, codes)
+    groups = {
+        "ignored": {"y": codes, "valid": sc.valid, "bases": sc.bases},
+        "modelled": {"y": codes, "valid": sc.valid, "bases": sc.bases, "censored": top},
+        "undone": {
+            "y": decode(codes, cond["response"]),
+            "valid": sc.valid,
+            "bases": sc.bases,
+            "censored": top,
+        },
     }
-    rows = []
-    for k, (gamma, cond, base, clipped) in enumerate(cells):
-        row = {
-            "true_gamma": gamma,
-            "condition": cond["label"],
-            "response": cond["response"],
-            "bits": cond["bits"],
-            "exposure": cond["exposure"],
-            "clipped_fraction": clipped,
-            "baseline": base.object_gloss,
-        }
-        for m, f in fits.items():
-            row[f"{m}_median"] = f[k].median
-            row[f"{m}_q05"] = f[k].q05
-            row[f"{m}_q95"] = f[k].q95
-            row[f"{m}_converged"] = f[k].converged
-        rows.append(row)
-    return rows
+    fits = {}
+    for camera in ("linear", "power"):
+        ms = [m for m in cfg["methods"] if (m == "modelled") == (camera == "power")]
+        seed = C.unit_seed(cfg["seed"], "fit", gamma, cond["label"], camera)
+        fits.update(zip(ms, C.fit_groups([groups[m] for m in ms], cfg, seed, camera), strict=True))
+    row = {
+        "true_gamma": gamma,
+        "condition": cond["label"],
+        "response": cond["response"],
+        "bits": cond["bits"],
+        "exposure": cond["exposure"],
+        "clipped_fraction": float(top.mean()),
+        "baseline": base.object_gloss,
+    }
+    for m in cfg["methods"]:
+        f = fits[m]
+        row[f"{m}_median"] = f.median
+        row[f"{m}_q05"] = f.q05
+        row[f"{m}_q95"] = f.q95
+        row[f"{m}_converged"] = f.converged
+    return C.unit_files({"objects.csv": [row]})
 
 
 def summarise(rows, methods) -> dict:
@@ -169,10 +181,9 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = run(cfg, args.jobs)
-    return C.finish(
-        NAME, out, args.results, cfg, {"objects.csv": rows}, summarise(rows, cfg["methods"]), plot
-    )
+    tables = C.run_units(NAME, units(cfg), out, args)
+    summary = summarise(tables["objects.csv"], cfg["methods"])
+    return C.finish(NAME, out, args.results, cfg, tables, summary, plot)
 
 
 if __name__ == "__main__":

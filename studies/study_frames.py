@@ -6,8 +6,9 @@ on 21 June at 40 N) at 5 ... 100 a day, and mornings or afternoons alone;
 one material on the paper's hemisphere (one view, 1 % relative noise,
 gensky's clear sky); posterior and baseline on the same curves.
 
-Usage: python studies/study_frames.py [--quick] [--jobs 2] [--out DIR]
-Writes studies/out/frames/{objects.csv, summary.json, frames.png}.
+Usage: python studies/study_frames.py [--quick] [--jobs 2 | --scheduler ADDRESS] [--out DIR]
+Writes studies/out/frames/{objects.csv, summary.json, frames.png} and one
+folder per (gamma, sampling) under units/ (a rerun skips them).
 """
 
 from __future__ import annotations
@@ -24,44 +25,49 @@ def hours_of(cond) -> tuple:
     return tuple(float(h) for h in np.linspace(cond["start"], cond["end"], cond["frames"]))
 
 
-def run(cfg: dict, jobs: int) -> list[dict]:
-    idx = tuple(C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"]))
-    rng = np.random.default_rng(cfg["seed"])
-    cells, groups = [], []
-    for gamma in cfg["gammas"]:
-        for cond in cfg["conditions"]:
-            sc = C.paper_scene(cfg["view"], cfg["sky"], idx, hours_of(cond))
-            y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
-            cells.append((gamma, cond, C.baseline_fit(sc, y)))
-            groups.append({"y": y, "valid": sc.valid, "bases": sc.bases})
-    # one sampler call per frame count (the likelihood's arrays need equal T)
-    fits = [None] * len(groups)
-    for t in sorted({g["y"].shape[1] for g in groups}):
-        ks = [k for k, g in enumerate(groups) if g["y"].shape[1] == t]
-        for k, f in zip(ks, C.fit_groups([groups[k] for k in ks], cfg, jobs), strict=True):
-            fits[k] = f
-    rows = []
-    for (gamma, cond, base), f in zip(cells, fits, strict=True):
-        rows.append(
-            {
-                "true_gamma": gamma,
-                "condition": cond["label"],
-                "frames": cond["frames"],
-                "start": cond["start"],
-                "end": cond["end"],
-                "post_median": f.median,
-                "post_q05": f.q05,
-                "post_q95": f.q95,
-                "post_error": f.median - gamma,
-                "post_facet_median_abs_error": float(np.median(np.abs(f.facet_median - gamma))),
-                "post_facet_median_width90": float(np.median(f.facet_q95 - f.facet_q05)),
-                "converged_fraction": f.converged,
-                "baseline": base.object_gloss,
-                "baseline_error": base.object_gloss - gamma,
-                "baseline_facet_median_abs_error": float(np.nanmedian(np.abs(base.gloss - gamma))),
-            }
+#: Config entries the study is cut along: one unit per (gamma, frame sampling).
+AXES = ("gammas", "conditions")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the table's order."""
+    return [
+        (
+            C.unit_name(NAME, f"g{gamma:g}", cond["label"]),
+            C.unit_options(cfg, AXES, gamma=gamma, cond=cond),
         )
-    return rows
+        for gamma in cfg["gammas"]
+        for cond in cfg["conditions"]
+    ]
+
+
+def unit(cfg: dict, gamma: float, cond: dict) -> dict[str, bytes]:
+    """One object seen at the frames of ``cond``: its ``objects.csv`` row."""
+    idx = tuple(C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"]))
+    sc = C.paper_scene(cfg["view"], cfg["sky"], idx, hours_of(cond))
+    rng = np.random.default_rng(C.unit_seed(cfg["seed"], "data", gamma, cond["label"]))
+    y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
+    base = C.baseline_fit(sc, y)
+    seed = C.unit_seed(cfg["seed"], "fit", gamma, cond["label"])
+    (f,) = C.fit_groups([{"y": y, "valid": sc.valid, "bases": sc.bases}], cfg, seed)
+    row = {
+        "true_gamma": gamma,
+        "condition": cond["label"],
+        "frames": cond["frames"],
+        "start": cond["start"],
+        "end": cond["end"],
+        "post_median": f.median,
+        "post_q05": f.q05,
+        "post_q95": f.q95,
+        "post_error": f.median - gamma,
+        "post_facet_median_abs_error": float(np.median(np.abs(f.facet_median - gamma))),
+        "post_facet_median_width90": float(np.median(f.facet_q95 - f.facet_q05)),
+        "converged_fraction": f.converged,
+        "baseline": base.object_gloss,
+        "baseline_error": base.object_gloss - gamma,
+        "baseline_facet_median_abs_error": float(np.nanmedian(np.abs(base.gloss - gamma))),
+    }
+    return C.unit_files({"objects.csv": [row]})
 
 
 def summarise(rows) -> dict:
@@ -152,8 +158,8 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = run(cfg, args.jobs)
-    return C.finish(NAME, out, args.results, cfg, {"objects.csv": rows}, summarise(rows), plot)
+    tables = C.run_units(NAME, units(cfg), out, args)
+    return C.finish(NAME, out, args.results, cfg, tables, summarise(tables["objects.csv"]), plot)
 
 
 if __name__ == "__main__":

@@ -9,8 +9,9 @@ relative noise, gensky's clear sky. Per facet: the posterior median and
 frame: the sun's path passes the camera's mirror direction, so the peak
 frame cannot tell gloss).
 
-Usage: python studies/study_geometry.py [--quick] [--jobs 2] [--out DIR]
-Writes studies/out/geometry/{facets.csv, objects.csv, summary.json, geometry.png}.
+Usage: python studies/study_geometry.py [--quick] [--jobs 2 | --scheduler ADDRESS] [--out DIR]
+Writes studies/out/geometry/{facets.csv, objects.csv, summary.json, geometry.png}
+and one folder per (view, gamma) under units/ (a rerun skips them).
 """
 
 from __future__ import annotations
@@ -23,54 +24,65 @@ import numpy as np
 NAME = "geometry"
 
 
-def run(cfg: dict, jobs: int) -> tuple[list[dict], list[dict]]:
-    rng = np.random.default_rng(cfg["seed"])
-    cells, groups = [], []
-    for view in cfg["views"]:
-        idx = tuple(C.facet_choice(view, cfg["facets"], cfg["seed"]))
-        sc = C.paper_scene(view, cfg["sky"], idx)
-        for gamma in cfg["gammas"]:
-            y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
-            cells.append((view, gamma, sc, C.baseline_fit(sc, y)))
-            groups.append({"y": y, "valid": sc.valid, "bases": sc.bases})
-    fits = C.fit_groups(groups, cfg, jobs)
-    facets, objects = [], []
-    for (view, gamma, sc, base), f in zip(cells, fits, strict=True):
-        degenerate = np.array(["mirror-degenerate" in fl for fl in base.flags])
-        cos_view = sc.geometry.cos_view
-        for k, fid in enumerate(sc.facet_index):
-            n = sc.geometry.normal[k]
-            facets.append(
-                {
-                    "view": view,
-                    "true_gamma": gamma,
-                    "facet": int(fid),
-                    "normal_azimuth": float(np.degrees(np.arctan2(n[0], n[1])) % 360),
-                    "normal_elevation": float(np.degrees(np.arcsin(np.clip(n[2], -1, 1)))),
-                    "cos_view": float(cos_view[k]),
-                    "mirror_degenerate": bool(degenerate[k]),
-                    "post_median": f.facet_median[k],
-                    "post_q05": f.facet_q05[k],
-                    "post_q95": f.facet_q95[k],
-                    "post_error": f.facet_median[k] - gamma,
-                    "baseline": base.gloss[k],
-                    "baseline_error": base.gloss[k] - gamma,
-                }
-            )
-        objects.append(
+#: Config entries the study is cut along: one unit per (view, gamma).
+AXES = ("views", "gammas")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the tables' order."""
+    return [
+        (
+            C.unit_name(NAME, view, f"g{gamma:g}"),
+            C.unit_options(cfg, AXES, view=view, gamma=gamma),
+        )
+        for view in cfg["views"]
+        for gamma in cfg["gammas"]
+    ]
+
+
+def unit(cfg: dict, view: str, gamma: float) -> dict[str, bytes]:
+    """One object seen from ``view``: its ``facets.csv`` and ``objects.csv`` rows."""
+    idx = tuple(C.facet_choice(view, cfg["facets"], cfg["seed"]))
+    sc = C.paper_scene(view, cfg["sky"], idx)
+    rng = np.random.default_rng(C.unit_seed(cfg["seed"], "data", view, gamma))
+    y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
+    base = C.baseline_fit(sc, y)
+    seed = C.unit_seed(cfg["seed"], "fit", view, gamma)
+    (f,) = C.fit_groups([{"y": y, "valid": sc.valid, "bases": sc.bases}], cfg, seed)
+    degenerate = np.array(["mirror-degenerate" in fl for fl in base.flags])
+    cos_view = sc.geometry.cos_view
+    facets = []
+    for k, fid in enumerate(sc.facet_index):
+        n = sc.geometry.normal[k]
+        facets.append(
             {
                 "view": view,
                 "true_gamma": gamma,
-                "facets": len(sc.facet_index),
-                "mirror_degenerate": int(degenerate.sum()),
-                "post_median": f.median,
-                "post_q05": f.q05,
-                "post_q95": f.q95,
-                "baseline": base.object_gloss,
-                "converged_fraction": f.converged,
+                "facet": int(fid),
+                "normal_azimuth": float(np.degrees(np.arctan2(n[0], n[1])) % 360),
+                "normal_elevation": float(np.degrees(np.arcsin(np.clip(n[2], -1, 1)))),
+                "cos_view": float(cos_view[k]),
+                "mirror_degenerate": bool(degenerate[k]),
+                "post_median": f.facet_median[k],
+                "post_q05": f.facet_q05[k],
+                "post_q95": f.facet_q95[k],
+                "post_error": f.facet_median[k] - gamma,
+                "baseline": base.gloss[k],
+                "baseline_error": base.gloss[k] - gamma,
             }
         )
-    return facets, objects
+    obj = {
+        "view": view,
+        "true_gamma": gamma,
+        "facets": len(sc.facet_index),
+        "mirror_degenerate": int(degenerate.sum()),
+        "post_median": f.median,
+        "post_q05": f.q05,
+        "post_q95": f.q95,
+        "baseline": base.object_gloss,
+        "converged_fraction": f.converged,
+    }
+    return C.unit_files({"facets.csv": facets, "objects.csv": [obj]})
 
 
 def summarise(facets) -> dict:
@@ -164,16 +176,8 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    facets, objects = run(cfg, args.jobs)
-    return C.finish(
-        NAME,
-        out,
-        args.results,
-        cfg,
-        {"facets.csv": facets, "objects.csv": objects},
-        summarise(facets),
-        plot,
-    )
+    tables = C.run_units(NAME, units(cfg), out, args)
+    return C.finish(NAME, out, args.results, cfg, tables, summarise(tables["facets.csv"]), plot)
 
 
 if __name__ == "__main__":

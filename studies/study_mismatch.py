@@ -12,8 +12,11 @@ the material's specular part (:func:`bayesgloss.reflectance.gloss_of_radiance_ma
 plastic 0.5 on grey 0.5: 2/3, metal 0.5: 0.5), and for roughness 0 also with
 Radiance's Fresnel raise at each facet's view angle.
 
-Usage: python studies/study_mismatch.py [--quick] [--jobs 2] [--out DIR] [--cache DIR]
-Writes studies/out/mismatch/{objects.csv, summary.json, mismatch.png}.
+Usage: python studies/study_mismatch.py [--quick] [--jobs 2 | --scheduler ADDRESS]
+[--out DIR] [--cache DIR]
+Writes studies/out/mismatch/{objects.csv, summary.json, mismatch.png} and one
+folder per material under units/ (a rerun skips them); rendered bundles are
+cached in --cache.
 """
 
 from __future__ import annotations
@@ -30,71 +33,77 @@ from bayesgloss import baseline, bundle, estimate, reflectance, sequences, sun
 NAME = "mismatch"
 
 
-def configs(cfg: dict) -> list[sequences.SequenceConfig]:
+def sequence_config(cfg: dict, material: str, roughness: float) -> sequences.SequenceConfig:
+    return sequences.SequenceConfig(
+        name=f"mismatch-{cfg['view']}-{material}-{cfg['specularity']:g}-r{roughness:g}",
+        view=cfg["view"],
+        material=material,
+        specularity=cfg["specularity"],
+        roughness=roughness,
+        sky=cfg["sky"],
+        image_size=cfg["image_size"],
+    )
+
+
+#: Config entries the study is cut along: one unit per (material, roughness).
+AXES = ("materials", "roughness")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the table's order."""
     return [
-        sequences.SequenceConfig(
-            name=f"mismatch-{cfg['view']}-{kind}-{cfg['specularity']:g}-r{rough:g}",
-            view=cfg["view"],
-            material=kind,
-            specularity=cfg["specularity"],
-            roughness=rough,
-            sky=cfg["sky"],
-            image_size=cfg["image_size"],
+        (
+            C.unit_name(NAME, kind, f"r{rough:g}"),
+            C.unit_options(cfg, AXES, material=kind, roughness=rough),
         )
         for kind in cfg["materials"]
         for rough in cfg["roughness"]
     ]
 
 
-def run(cfg: dict, jobs: int, cache: Path) -> list[dict]:
-    cfgs = configs(cfg)
-    paths = sequences.render_bundles(cfgs, cache, jobs=jobs, progress=False)
-    rows = []
-    for k, (sc, path) in enumerate(zip(cfgs, paths, strict=True)):
-        b = bundle.read_bundle(path)
-        res = estimate.estimate_bundle(
-            b,
-            illumination=sc.sky,
-            seed=cfg["seed"] + k,
-            jobs=jobs,
-            sampler_options=cfg.get("sampler"),
-        )
-        curves = bundle.facet_curves(b)
-        hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
-        base = baseline.peak_frame_gloss(
-            curves.luminance,
-            curves.valid,
-            b.view_geometry(),
-            b.sun_direction,
-            ids=curves.ids,
-            frame_hours=hours,
-        )
-        o = res.summary["object"]
-        fres = reflectance.gloss_of_radiance_material_fresnel(
-            sc.material, sc.specularity, sc.colour, b.view_geometry().cos_view
-        )
-        rows.append(
-            {
-                "material": sc.material,
-                "specularity": sc.specularity,
-                "roughness": sc.roughness,
-                "true_gamma": b.truth["gloss"],
-                "true_gamma_fresnel": float(np.mean(fres)),
-                "post_median": o["gamma"]["median"],
-                "post_q05": o["gamma"]["q05"],
-                "post_q95": o["gamma"]["q95"],
-                "post_n_median": o["n"]["median"],
-                "facets": o["facets"],
-                "facets_converged": o["facets_converged"],
-                "baseline": base.object_gloss,
-                "sampler_seconds": res.summary["sampler"]["seconds"],
-            }
-        )
-        print(
-            f"{sc.name}: posterior {o['gamma']['median']:.3f} baseline {base.object_gloss:.3f}",
-            file=sys.stderr,
-        )
-    return rows
+def unit(cfg: dict, material: str, roughness: float, cache: str) -> dict[str, bytes]:
+    """One material rendered (or taken from the bundle cache ``cache``) and
+    estimated: its ``objects.csv`` row."""
+    sc = sequence_config(cfg, material, roughness)
+    (path,) = sequences.render_bundles([sc], cache, jobs=1, progress=False)
+    b = bundle.read_bundle(path)
+    res = estimate.estimate_bundle(
+        b,
+        illumination=sc.sky,
+        seed=C.seed_int(C.unit_seed(cfg["seed"], "fit", material, roughness)),
+        jobs=1,
+        sampler_options=cfg.get("sampler"),
+    )
+    curves = bundle.facet_curves(b)
+    hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
+    base = baseline.peak_frame_gloss(
+        curves.luminance,
+        curves.valid,
+        b.view_geometry(),
+        b.sun_direction,
+        ids=curves.ids,
+        frame_hours=hours,
+    )
+    o = res.summary["object"]
+    fres = reflectance.gloss_of_radiance_material_fresnel(
+        sc.material, sc.specularity, sc.colour, b.view_geometry().cos_view
+    )
+    row = {
+        "material": sc.material,
+        "specularity": sc.specularity,
+        "roughness": sc.roughness,
+        "true_gamma": b.truth["gloss"],
+        "true_gamma_fresnel": float(np.mean(fres)),
+        "post_median": o["gamma"]["median"],
+        "post_q05": o["gamma"]["q05"],
+        "post_q95": o["gamma"]["q95"],
+        "post_n_median": o["n"]["median"],
+        "facets": o["facets"],
+        "facets_converged": o["facets_converged"],
+        "baseline": base.object_gloss,
+        "sampler_seconds": res.summary["sampler"]["seconds"],
+    }
+    return C.unit_files({"objects.csv": [row]})
 
 
 def plot(out: Path) -> None:
@@ -154,7 +163,7 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = run(cfg, args.jobs, cache)
+    rows = C.run_units(NAME, units(cfg), out, args, cache=str(cache.resolve()))["objects.csv"]
     C.write_table(out / "objects.csv", rows)
     summary = {
         "config": cfg,

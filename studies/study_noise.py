@@ -7,8 +7,9 @@ forward model with relative noise of sd 0.3 % ... 30 % (the likelihood's
 noise model), a few noise replicates per cell. The same curves go to the
 posterior (population gloss of the facet draws) and to the baseline.
 
-Usage: python studies/study_noise.py [--quick] [--jobs 2] [--out DIR]
-Writes studies/out/noise/{objects.csv, facets.csv, summary.json, noise.png}.
+Usage: python studies/study_noise.py [--quick] [--jobs 2 | --scheduler ADDRESS] [--out DIR]
+Writes studies/out/noise/{objects.csv, facets.csv, summary.json, noise.png}
+and one folder per (gamma, noise) cell under units/ (a rerun skips them).
 """
 
 from __future__ import annotations
@@ -22,20 +23,36 @@ import numpy as np
 NAME = "noise"
 
 
-def run(cfg: dict, jobs: int) -> tuple[list[dict], list[dict]]:
+#: Config entries the study is cut along: one unit per (gamma, noise), its replicates together.
+AXES = ("gammas", "noise")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the tables' order."""
+    return [
+        (
+            C.unit_name(NAME, f"g{gamma:g}", f"noise{noise:g}"),
+            C.unit_options(cfg, AXES, gamma=gamma, noise=noise),
+        )
+        for gamma in cfg["gammas"]
+        for noise in cfg["noise"]
+    ]
+
+
+def unit(cfg: dict, gamma: float, noise: float) -> dict[str, bytes]:
+    """The replicates of one (gamma, noise) cell, fitted in one sampler call:
+    rows of ``objects.csv`` and ``facets.csv``."""
     idx = C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"])
     sc = C.paper_scene(cfg["view"], cfg["sky"], tuple(idx))
-    rng = np.random.default_rng(cfg["seed"])
     cells, groups = [], []
-    for gamma in cfg["gammas"]:
-        for noise in cfg["noise"]:
-            for rep in range(cfg["replicates"]):
-                y = C.simulate(sc, gamma, cfg["exponent"], noise, rng)
-                cells.append((gamma, noise, rep, y, C.baseline_fit(sc, y)))
-                groups.append({"y": y, "valid": sc.valid, "bases": sc.bases})
-    fits = C.fit_groups(groups, cfg, jobs)
+    for rep in range(cfg["replicates"]):
+        rng = np.random.default_rng(C.unit_seed(cfg["seed"], "data", gamma, noise, rep))
+        y = C.simulate(sc, gamma, cfg["exponent"], noise, rng)
+        cells.append((rep, C.baseline_fit(sc, y)))
+        groups.append({"y": y, "valid": sc.valid, "bases": sc.bases})
+    fits = C.fit_groups(groups, cfg, C.unit_seed(cfg["seed"], "fit", gamma, noise))
     objects, facets = [], []
-    for (gamma, noise, rep, _, base), fit in zip(cells, fits, strict=True):
+    for (rep, base), fit in zip(cells, fits, strict=True):
         objects.append(
             {
                 "true_gamma": gamma,
@@ -64,7 +81,7 @@ def run(cfg: dict, jobs: int) -> tuple[list[dict], list[dict]]:
                     "baseline_width": base.interval[k, 1] - base.interval[k, 0],
                 }
             )
-    return objects, facets
+    return C.unit_files({"objects.csv": objects, "facets.csv": facets})
 
 
 def summarise(objects, facets) -> dict:
@@ -147,14 +164,14 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    objects, facets = run(cfg, args.jobs)
+    tables = C.run_units(NAME, units(cfg), out, args)
     return C.finish(
         NAME,
         out,
         args.results,
         cfg,
-        {"objects.csv": objects, "facets.csv": facets},
-        summarise(objects, facets),
+        tables,
+        summarise(tables["objects.csv"], tables["facets.csv"]),
         plot,
         published=["objects.csv"],
     )

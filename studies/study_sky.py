@@ -7,8 +7,9 @@ noise) under gensky clear, intermediate and overcast, some of the 15 CIE
 general skies and the Perez (gendaylit) sky; each estimated under every
 illumination model of the config; the baseline on the same curves.
 
-Usage: python studies/study_sky.py [--quick] [--jobs 2] [--out DIR]
-Writes studies/out/sky/{objects.csv, summary.json, sky.png}.
+Usage: python studies/study_sky.py [--quick] [--jobs 2 | --scheduler ADDRESS] [--out DIR]
+Writes studies/out/sky/{objects.csv, summary.json, sky.png} and one folder
+per (gamma, data sky) under units/ (a rerun skips them).
 """
 
 from __future__ import annotations
@@ -21,23 +22,38 @@ import numpy as np
 NAME = "sky"
 
 
-def run(cfg: dict, jobs: int) -> list[dict]:
+#: Config entries the study is cut along: one unit per (gamma, data sky), all models.
+AXES = ("gammas", "data_skies")
+
+
+def units(cfg: dict) -> list[tuple[str, dict]]:
+    """(name, options) of every unit, in the table's order."""
+    return [
+        (
+            C.unit_name(NAME, f"g{gamma:g}", data_sky),
+            C.unit_options(cfg, AXES, gamma=gamma, data_sky=data_sky),
+        )
+        for gamma in cfg["gammas"]
+        for data_sky in cfg["data_skies"]
+    ]
+
+
+def unit(cfg: dict, gamma: float, data_sky: str) -> dict[str, bytes]:
+    """One object's curves under ``data_sky``, estimated under every model
+    of the config in one sampler call: its ``objects.csv`` rows."""
     idx = tuple(C.facet_choice(cfg["view"], cfg["facets"], cfg["seed"]))
-    rng = np.random.default_rng(cfg["seed"])
-    cells, groups = [], []
-    for gamma in cfg["gammas"]:
-        for data_sky in cfg["data_skies"]:
-            sc = C.paper_scene(cfg["view"], data_sky, idx)
-            y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
-            base = C.baseline_fit(sc, y)
-            for model in cfg["models"]:
-                est_sky = data_sky if model == "matching" else model
-                est = C.paper_scene(cfg["view"], est_sky, idx)
-                cells.append((gamma, data_sky, model, est_sky, base))
-                groups.append({"y": y, "valid": sc.valid, "bases": est.bases})
-    fits = C.fit_groups(groups, cfg, jobs)
+    sc = C.paper_scene(cfg["view"], data_sky, idx)
+    rng = np.random.default_rng(C.unit_seed(cfg["seed"], "data", gamma, data_sky))
+    y = C.simulate(sc, gamma, cfg["exponent"], cfg["noise"], rng)
+    base = C.baseline_fit(sc, y)
+    est_skies = [data_sky if model == "matching" else model for model in cfg["models"]]
+    groups = [
+        {"y": y, "valid": sc.valid, "bases": C.paper_scene(cfg["view"], s, idx).bases}
+        for s in est_skies
+    ]
+    fits = C.fit_groups(groups, cfg, C.unit_seed(cfg["seed"], "fit", gamma, data_sky))
     rows = []
-    for (gamma, data_sky, model, est_sky, base), f in zip(cells, fits, strict=True):
+    for model, est_sky, f in zip(cfg["models"], est_skies, fits, strict=True):
         rows.append(
             {
                 "true_gamma": gamma,
@@ -53,7 +69,7 @@ def run(cfg: dict, jobs: int) -> list[dict]:
                 "baseline_error": base.object_gloss - gamma,
             }
         )
-    return rows
+    return C.unit_files({"objects.csv": rows})
 
 
 def summarise(rows) -> dict:
@@ -130,8 +146,8 @@ def main(argv=None, config: dict | None = None) -> dict:
     cfg = C.load_config(NAME, args.quick, config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = run(cfg, args.jobs)
-    return C.finish(NAME, out, args.results, cfg, {"objects.csv": rows}, summarise(rows), plot)
+    tables = C.run_units(NAME, units(cfg), out, args)
+    return C.finish(NAME, out, args.results, cfg, tables, summarise(tables["objects.csv"]), plot)
 
 
 if __name__ == "__main__":

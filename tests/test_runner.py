@@ -1,6 +1,7 @@
 """Resumable fan-out: a run killed part-way resumes without redoing finished
 units, and a Dask cluster gives the numbers local processes give."""
 
+import functools
 import json
 import os
 import signal
@@ -100,3 +101,47 @@ def test_dask_cluster_gives_the_local_numbers(bundles, tmp_path):
         sa = json.loads((a / "summary.json").read_text())
         sb = json.loads((b / "summary.json").read_text())
         assert [f["gamma"] for f in sa["facets"]] == [f["gamma"] for f in sb["facets"]]
+
+
+def _unit_script(folder):
+    """A script that imports a sibling module, as the studies import _common."""
+    folder.mkdir()
+    (folder / "unit_helper.py").write_text("def double(x):\n    return 2 * x\n")
+    (folder / "unit_script.py").write_text(
+        "import json\n"
+        "import os\n\n"
+        "import unit_helper\n\n\n"
+        "def unit(x):\n"
+        "    return {'out.json': json.dumps([unit_helper.double(x), os.getpid()]).encode()}\n"
+    )
+    return folder / "unit_script.py"
+
+
+def test_script_unit_runs_a_script_function_in_worker_processes(tmp_path):
+    script = _unit_script(tmp_path / "scripts")
+    func = functools.partial(runner.script_unit, str(script), "unit")
+    units = [(f"u{x}", {"x": x}) for x in (1, 2, 3)]
+    folders = runner.run_units(func, units, tmp_path / "out", jobs=2)
+    got = [json.loads((f / "out.json").read_text()) for f in folders]
+    assert [v for v, _ in got] == [2, 4, 6]
+    assert os.getpid() not in {pid for _, pid in got}  # ran in the workers
+    assert "unit_script" not in sys.modules and "unit_helper" not in sys.modules
+    # a failing unit raises in the caller and leaves no folder behind
+    bad = functools.partial(runner.script_unit, str(script), "no_such_function")
+    with pytest.raises(AttributeError, match="no_such_function"):
+        runner.run_units(bad, [("bad", {"x": 1})], tmp_path / "bad", jobs=1)
+    assert list((tmp_path / "bad").iterdir()) == []
+
+
+def test_script_unit_on_a_dask_cluster(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    script = _unit_script(tmp_path / "scripts")
+    func = functools.partial(runner.script_unit, str(script), "unit")
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        (folder,) = runner.run_units(
+            func, [("u5", {"x": 5})], tmp_path / "out", scheduler=cluster.scheduler_address
+        )
+    value, pid = json.loads((folder / "out.json").read_text())
+    assert value == 10 and pid != os.getpid()

@@ -1,12 +1,18 @@
 """Every sensitivity study (studies/study_*.py) runs from its committed config
 at test size (``--quick``), writes its results and figure, and its quick
-results show the effect the full study is about."""
+results show the effect the full study is about. A study killed part-way
+resumes without redoing finished units and ends with the numbers of an
+uninterrupted run, whatever the job count or executor."""
 
 from __future__ import annotations
 
 import importlib
 import json
+import os
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -14,17 +20,31 @@ import pytest
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
 
-def run_study(name: str, tmp_path: Path, *extra: str):
+def run_study(name: str, tmp_path: Path, *extra: str, jobs: int = 1, config=None):
     if str(STUDIES) not in sys.path:
         sys.path.insert(0, str(STUDIES))
     module = importlib.import_module(f"study_{name}")
     out = tmp_path / name
-    summary = module.main(["--quick", "--jobs", "1", "--out", str(out), *extra])
+    summary = module.main(["--quick", "--jobs", str(jobs), "--out", str(out), *extra], config)
     assert (out / f"{name}.png").stat().st_size > 10_000
     assert (out / "objects.csv").exists()
     saved = json.loads((out / "summary.json").read_text())
     assert saved["config"]["seed"] == summary["config"]["seed"]
     return summary["summary"], out
+
+
+def finished_units(out: Path) -> list[Path]:
+    """A study's finished unit folders (hidden ones are units being written)."""
+    units = out / "units"
+    return (
+        sorted(p for p in units.iterdir() if not p.name.startswith(".")) if units.exists() else []
+    )
+
+
+@pytest.fixture(scope="module")
+def noise_run(tmp_path_factory):
+    """The noise study at test size on two local processes, uninterrupted."""
+    return run_study("noise", tmp_path_factory.mktemp("jobs2"), jobs=2)
 
 
 def test_configs_have_seeds():
@@ -34,14 +54,74 @@ def test_configs_have_seeds():
         assert (STUDIES / f"study_{path.stem}.py").exists(), path.name
 
 
-def test_noise(tmp_path):
-    s, _ = run_study("noise", tmp_path)
+def test_noise(noise_run):
+    s, _ = noise_run
     low, high = s["0.003"], s["0.3"]
     # more noise: larger posterior error and wider intervals, per facet
     assert low["facet_post_median_abs_error"] < high["facet_post_median_abs_error"]
     assert 5 * low["facet_post_median_width90"] < high["facet_post_median_width90"]
     # at 0.3 % noise the posterior finds gamma 0.5 to within 0.02
     assert low["object_post_mean_abs_error"] < 0.02
+
+
+def test_killed_study_resumes_with_the_numbers_of_an_uninterrupted_run(noise_run, tmp_path):
+    _, reference = noise_run
+    expected = [p.name for p in finished_units(reference)]
+    assert len(expected) == 2  # (gamma 0.5) x (noise 0.003, 0.3)
+    out = tmp_path / "noise"
+    cmd = [sys.executable, str(STUDIES / "study_noise.py"), "--quick", "--jobs", "1"]
+    cmd += ["--out", str(out)]
+    # its own session, so the kill reaches the worker process too
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    deadline = time.monotonic() + 180
+    while not finished_units(out) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)  # a real kill of the running study, part-way
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    done = finished_units(out)
+    assert 1 <= len(done) < len(expected)
+    assert not (out / "objects.csv").exists()
+    # what is left is complete units only, each equal to the two-process run's
+    before = {}
+    for unit in done:
+        assert unit.name in expected
+        assert [f.name for f in unit.iterdir()] == ["rows.json"]
+        rows = json.loads((unit / "rows.json").read_text())
+        assert len(rows["objects.csv"]) == 1 and len(rows["facets.csv"]) == 4
+        assert (unit / "rows.json").read_bytes() == (
+            reference / "units" / unit.name / "rows.json"
+        ).read_bytes()
+        before[unit.name] = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in unit.iterdir()}
+    # the rerun finishes the rest and leaves the finished units untouched
+    subprocess.run(cmd, check=True, capture_output=True, timeout=300)
+    assert [p.name for p in finished_units(out)] == expected
+    for name, files in before.items():
+        unit = out / "units" / name
+        assert {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in unit.iterdir()} == files
+    # tables bit for bit those of the uninterrupted run on two processes
+    for table in ("objects.csv", "facets.csv"):
+        assert (out / table).read_bytes() == (reference / table).read_bytes(), table
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary == json.loads((reference / "summary.json").read_text())
+
+
+def test_study_on_a_dask_cluster_gives_the_local_numbers(noise_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, reference = noise_run
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        # one of the reference run's units: the same options, so the same folder
+        _, out = run_study(
+            "noise", tmp_path, "--scheduler", cluster.scheduler_address, config={"noise": [0.3]}
+        )
+    (unit,) = finished_units(out)
+    assert (unit / "rows.json").read_bytes() == (
+        reference / "units" / unit.name / "rows.json"
+    ).read_bytes()
 
 
 def test_camera(tmp_path):
