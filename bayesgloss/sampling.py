@@ -385,48 +385,59 @@ class RidgeCoordinates:
             self.log_n_grid, self.center[idx], self.factor[idx], self.active[idx]
         )
 
+    @property
+    def _nodes(self) -> np.ndarray:
+        """(c1, c2, L11, L21, L22) at every node and its successor, (B*N, 10)."""
+        nodes = self.__dict__.get("_nodes_cache")
+        if nodes is None:
+            v = np.concatenate([self.center, self.factor], axis=-1)  # (B, N, 5)
+            nxt = np.concatenate([v[:, 1:], v[:, -1:]], axis=1)
+            nodes = np.ascontiguousarray(np.concatenate([v, nxt - v], -1).reshape(-1, 10))
+            object.__setattr__(self, "_nodes_cache", nodes)
+        return nodes
+
     def _at(self, log_n):
-        """c and L interpolated at log n (B, K): (B, K, 2), (B, K, 3)."""
+        """(c1, c2, L11, L21, L22) interpolated at log n (B, K): (B, K, 5)."""
         grid = self.log_n_grid
         n = len(grid)
         b, k = log_n.shape
         pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
         j = pos.astype(np.intp)
-        w = (pos - j)[..., None]
-        rows = (j + (np.arange(b) * n)[:, None]).ravel()
-        c = self.center.reshape(-1, 2)
-        f = self.factor.reshape(-1, 3)
-        c0, c1 = np.take(c, rows, 0).reshape(b, k, 2), np.take(c, rows + 1, 0).reshape(b, k, 2)
-        f0, f1 = np.take(f, rows, 0).reshape(b, k, 3), np.take(f, rows + 1, 0).reshape(b, k, 3)
-        return c0 + w * (c1 - c0), f0 + w * (f1 - f0)
+        rows = np.take(self._nodes, (j + (np.arange(b) * n)[:, None]).ravel(), 0)
+        rows = rows.reshape(b, k, 10)
+        return rows[..., :5] + (pos - j)[..., None] * rows[..., 5:]
 
     def to_theta(self, x):
         """theta (B, K, P) and log |d theta / d x| (B, K) at x (B, K, P);
         -inf Jacobian where x maps to no scale s > 0."""
         x = np.asarray(x, dtype=float)
-        c, f = self._at(x[..., 0])
-        a = c[..., 0] + f[..., 0] * x[..., 1]
-        b = c[..., 1] + f[..., 1] * x[..., 1] + f[..., 2] * x[..., 2]
+        if not self.active.any():
+            return x, np.zeros(x.shape[:2])
+        v = self._at(x[..., 0])
+        a = v[..., 0] + v[..., 2] * x[..., 1]
+        b = v[..., 1] + v[..., 3] * x[..., 1] + v[..., 4] * x[..., 2]
         s = a + b
         ok = s > 0
         s = np.where(ok, s, 1.0)
-        act = self.active[:, None]
-        th = x.copy()
-        th[..., 0] = np.where(act, np.where(ok, b / s, -1.0), x[..., 0])
-        th[..., 1] = np.where(act, x[..., 0], x[..., 1])
-        th[..., 2] = np.where(act, np.log(s), x[..., 2])
-        log_jac = np.log(f[..., 0]) + np.log(f[..., 2]) - 2.0 * th[..., 2]
-        log_jac = np.where(ok, log_jac, -np.inf)
-        return th, np.where(act, log_jac, 0.0)
+        th = np.empty_like(x)
+        th[..., 3:] = x[..., 3:]
+        th[..., 0] = np.where(ok, b / s, -1.0)
+        th[..., 1] = x[..., 0]
+        th[..., 2] = np.log(s)
+        log_jac = np.where(ok, np.log(v[..., 2] * v[..., 4]) - 2.0 * th[..., 2], -np.inf)
+        if self.active.all():
+            return th, log_jac
+        act = self.active[:, None, None]
+        return np.where(act, th, x), np.where(act[..., 0], log_jac, 0.0)
 
     def from_theta(self, theta):
         """x (B, K, P) at theta (B, K, P) (the inverse of :meth:`to_theta`)."""
         th = np.asarray(theta, dtype=float)
-        c, f = self._at(th[..., 1])
+        v = self._at(th[..., 1])
         s = np.exp(th[..., 2])
         a, b = s * (1.0 - th[..., 0]), s * th[..., 0]
-        u1 = (a - c[..., 0]) / f[..., 0]
-        u2 = (b - c[..., 1] - f[..., 1] * u1) / f[..., 2]
+        u1 = (a - v[..., 0]) / v[..., 2]
+        u2 = (b - v[..., 1] - v[..., 3] * u1) / v[..., 4]
         act = self.active[:, None]
         x = th.copy()
         x[..., 0] = np.where(act, th[..., 1], th[..., 0])
@@ -476,7 +487,8 @@ def sample_posterior(
     *,
     n_ensembles: int = 4,
     n_walkers: int | None = None,
-    burn: int = 300,
+    burn: int = 100,
+    burn_taus: float = 5.0,
     chunk: int = 100,
     min_tau_multiple: float = 50.0,
     max_steps: int = 8000,
@@ -510,6 +522,11 @@ def sample_posterior(
         Walkers per ensemble (even, >= 2 P); default 2 P.
     burn : int
         Steps discarded after the start (rounded up to whole chunks).
+    burn_taus : float
+        Discard at least this many integrated autocorrelation times in all:
+        where ``burn`` was shorter, the start of the production run is
+        dropped too (at most half of it) before the run is measured and
+        thinned into draws.
     chunk : int
         Steps between convergence checks.
     min_tau_multiple : float
@@ -559,6 +576,7 @@ def sample_posterior(
         n_ensembles=n_ensembles,
         n_walkers=walkers,
         burn=burn,
+        burn_taus=burn_taus,
         chunk=chunk,
         min_tau_multiple=min_tau_multiple,
         max_steps=max_steps,
@@ -602,6 +620,7 @@ def _sample_stream(
     n_ensembles,
     n_walkers,
     burn,
+    burn_taus,
     chunk,
     min_tau_multiple,
     max_steps,
@@ -687,9 +706,15 @@ def _sample_stream(
             # one autocorrelation function averaged over the walkers of every
             # ensemble (the same sampler on the same target): (P,) [steps]
             t = thin * integrated_time(run.reshape(len(run), 1, e * n_walkers, p))[0]
-            need = np.nan_to_num(t, nan=np.inf).max() * min_tau_multiple
+            t_max = np.nan_to_num(t, nan=np.inf).max()
+            # burn-in of at least burn_taus tau: where the fixed burn was shorter,
+            # the start of the production run is discarded too
+            drop = burn_taus * t_max - burn_chunks * chunk
+            drop = int(np.ceil(drop / thin)) if np.isfinite(drop) and drop > 0 else 0
+            run = run[min(drop, len(run) // 2) :]
             draws = _ensemble_draws(run, draws_per_ensemble)  # (E, S, P)
-            enough = n_steps >= need
+            enough = len(run) * thin >= t_max * min_tau_multiple
+            need = t_max * min_tau_multiple + drop * thin
             if (enough and _gamma_converged(draws[..., 0])) or n_steps >= max_steps:
                 out[f] = draws
                 tau_out[f], steps_out[f] = t, n_steps

@@ -1,16 +1,29 @@
-"""Benchmark: converged facet posteriors per second, batched sampler against stock
-emcee on the same facets, in one run.
+"""Benchmark: converged facet posteriors per second, the batched sampler against
+stock emcee on the same facets, in one run.
 
-Facets: the paper hemisphere seen from its five views under gensky's clear
-sky (the forward-model bases), with gloss, exponent, scale and noise drawn
-from the prior, observations simulated from the likelihood. Both samplers
-run the protocol bayesgloss uses: 4 independent ensembles of 8 walkers per
-facet, 300 burn-in steps, production until every ensemble has run 50
-integrated autocorrelation times and ArviZ finds gamma converged (R-hat <
-1.01, bulk and tail ESS >= 400). Stock emcee runs each ensemble of each
-facet as its own ``EnsembleSampler`` (vectorize=True, the same move mix).
+Facet sets (``--facets-from``):
 
-Usage: python studies/bench_sampling.py [--facets 1200] [--emcee-facets 12] [--jobs 2]
+- ``prior``: the paper hemisphere seen from its five views under gensky's
+  clear sky (the forward-model bases), gloss, exponent, scale and noise drawn
+  from the likelihood's prior (noise from 0.01 % to 200 %), curves simulated
+  from the likelihood;
+- ``paper60``: every facet of the paper's 60 Radiance sequences (the study
+  the goal is about), each under the sky model that rendered it, as
+  :func:`bayesgloss.estimate.estimate_bundle` sets them up.
+
+Both samplers run the protocol of :func:`bayesgloss.sampling.sample_posterior`
+with its defaults: sigma integrated out, ridge coordinates for low-noise
+facets, 4 independent ensembles of 2 P walkers, the same move mix, burn-in of
+at least 5 integrated autocorrelation times, production until the pooled
+autocorrelation time says 50 tau and ArviZ finds gamma converged (R-hat <
+1.01, bulk and tail ESS >= 400), at most 8000 steps. Stock emcee runs each
+ensemble of each facet as its own ``EnsembleSampler`` (``vectorize=True``) on
+the same log density, one facet after another, in one process; the batched
+sampler uses ``--jobs`` processes. A facet counts as converged when ArviZ's
+R-hat and ESS criteria hold for its gamma draws.
+
+Usage: python studies/bench_sampling.py [--facets-from prior|paper60] [--facets 1200]
+       [--emcee-facets 12] [--jobs 2] [--cache /tmp/paper60]
 """
 
 from __future__ import annotations
@@ -25,15 +38,25 @@ import arviz as az
 import emcee
 import numpy as np
 
+from bayesgloss import estimate, render, sampling, scene, sequences
 from bayesgloss import likelihood as lk
-from bayesgloss import render, sampling, scene
 
 logging.getLogger("emcee").setLevel(logging.ERROR)  # its short-chain warnings, every check
 
-CONFIG = {"seed": 2026, "walkers": None, "ensembles": 4, "burn": 300, "tau_multiple": 50}
+SEED = 2026
+PROTOCOL = {  # sample_posterior's defaults, repeated for the stock emcee replica
+    "ensembles": 4,
+    "burn": 100,
+    "burn_taus": 5.0,
+    "chunk": 100,
+    "tau_multiple": 50.0,
+    "max_steps": 8000,
+    "draws": 1000,
+}
 
 
-def facet_set(n: int, seed: int):
+def prior_facets(n: int, seed: int) -> tuple[lk.CurveData, np.ndarray]:
+    """``n`` facets of the paper scene with parameters drawn from the prior."""
     blocks = []
     for view in ("W", "SW", "S", "SE", "E"):
         seq = scene.paper_sequence(view=view)
@@ -60,13 +83,49 @@ def facet_set(n: int, seed: int):
     return lk.curve_data(y, v[idx], bases, priors=priors), truth[:, 0]
 
 
+def paper60_facets(cache: str) -> lk.CurveData:
+    """Every facet with at least 4 usable frames of the paper's 60 Radiance
+    sequences, under the sky model that rendered each."""
+    from bayesgloss import bundle as bundle_io
+
+    configs = sequences.paper_configs()
+    paths = sequences.render_bundles(configs, cache, progress=False)
+    parts = []
+    for cfg, path in zip(configs, paths, strict=True):
+        b = bundle_io.read_bundle(path)
+        y, usable, cens = estimate.observations(bundle_io.facet_curves(b))
+        keep = usable.sum(axis=1) >= 4
+        bases = estimate.bundle_bases(b, cfg.sky)
+        sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
+        parts.append(lk.curve_data(y[keep], usable[keep], sub, censored=cens[keep]))
+    cat = {
+        k: np.concatenate([getattr(d, k) for d in parts])
+        for k in ("y", "valid", "censored", "diffuse", "glossy")
+    }
+    exps = np.exp(parts[0].log_n_grid)
+    bases = render.FacetBases(cat["diffuse"], cat["glossy"], exps)
+    return lk.curve_data(cat["y"], cat["valid"], bases, censored=cat["censored"])
+
+
+def gamma_converged(gamma) -> bool:
+    """ArviZ's R-hat < 1.01 and bulk and tail ESS >= 400 on (chains, draws)."""
+    return bool(
+        az.rhat(gamma) < 1.01
+        and az.ess(gamma, method="bulk") >= 400
+        and az.ess(gamma, method="tail") >= 400
+    )
+
+
 def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
-    """One facet with stock emcee: E samplers run to the same stopping rule."""
-    # the same target as the batched sampler: sigma integrated out where possible
+    """One facet with stock emcee, the batched sampler's protocol replayed:
+    E samplers on the same log density in the same coordinates."""
+    pr = PROTOCOL
     marginal = lk.sigma_marginal_supported(data)
-    log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
+    density = lk.log_probability_sigma_marginal if marginal else lk.log_probability
     p = 3 if marginal else data.n_params
-    w, e = CONFIG["walkers"] or 2 * p, CONFIG["ensembles"]
+    w, e = 2 * p, pr["ensembles"]
+    coords = sampling.RidgeCoordinates.of(data)
+    log_prob = coords.log_prob(density, data)
     rng = np.random.default_rng(seed)
     moves = [
         (emcee.moves.StretchMove(), 0.2),
@@ -75,77 +134,71 @@ def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
     ]
     samplers = []
     for k in range(e):
-        start = sampling.initial_ensemble(data, w, rng)[0, :, :p]
-        s = emcee.EnsembleSampler(
-            w, p, lambda th: log_prob(th[None], data)[0], vectorize=True, moves=moves
-        )
+        start = coords.from_theta(sampling.initial_ensemble(data, w, rng)[..., :p])[0]
+        s = emcee.EnsembleSampler(w, p, lambda x: log_prob(x[None])[0], vectorize=True, moves=moves)
         s.random_state = np.random.RandomState(seed * 10 + k).get_state()
-        s.run_mcmc(start, CONFIG["burn"])
+        s.run_mcmc(start, pr["burn"])
         s.reset()
         samplers.append(s)
-    steps = 0
+    steps, next_check = 0, max(pr["chunk"], 10 * pr["tau_multiple"])
     while True:
         for s in samplers:
-            s.run_mcmc(None, 100)
-        steps += 100
-        tau = max(
-            np.max(emcee.autocorr.integrated_time(s.get_chain(), quiet=True)) for s in samplers
-        )
-        if steps >= CONFIG["tau_multiple"] * tau or steps >= 8000:
-            per = max(1, 1000 // w)
-            idx = np.linspace(0, steps - 1, per).round().astype(int)
-            g = np.stack([s.get_chain()[idx, :, 0].T.ravel() for s in samplers])
-            ok = (
-                az.rhat(g) < 1.01
-                and az.ess(g, method="bulk") >= 400
-                and az.ess(g, method="tail") >= 400
-            )
-            if ok or steps >= 8000:
-                return bool(ok), steps
+            s.run_mcmc(None, pr["chunk"])
+        steps += pr["chunk"]
+        if steps < next_check and steps < pr["max_steps"]:
+            continue
+        x = np.concatenate([s.get_chain() for s in samplers], axis=1)  # (N, E W, P)
+        th = coords.to_theta(x.transpose(1, 0, 2).reshape(1, -1, p))[0]
+        th = th.reshape(e * w, steps, p).transpose(1, 0, 2)
+        tau = np.max(emcee.autocorr.integrated_time(th, quiet=True))
+        drop = int(np.ceil(max(0.0, pr["burn_taus"] * tau - pr["burn"])))
+        drop = min(drop, steps // 2)
+        used = th[drop:]
+        per = max(1, pr["draws"] // w)
+        idx = np.linspace(0, len(used) - 1, per).round().astype(int)
+        g = used[idx, :, 0].T.reshape(e, w * per)
+        enough = len(used) >= pr["tau_multiple"] * tau
+        if (enough and gamma_converged(g)) or steps >= pr["max_steps"]:
+            return gamma_converged(g), steps
+        if enough:  # the same schedule of looks as sample_posterior
+            next_check = steps + max(pr["chunk"], 0.25 * steps)
+        else:
+            next_check = max(pr["tau_multiple"] * tau + drop, steps + pr["chunk"])
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--facets", type=int, default=1200)
+    ap.add_argument("--facets-from", choices=["prior", "paper60"], default="prior")
+    ap.add_argument("--facets", type=int, default=1200, help="prior set size")
     ap.add_argument("--emcee-facets", type=int, default=12)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cache", default="/tmp/paper60", help="paper60: bundle cache")
     ap.add_argument("--out", default="studies/out/bench_sampling")
     args = ap.parse_args(argv)
-    data, truth = facet_set(args.facets, CONFIG["seed"])
+    truth = None
+    if args.facets_from == "prior":
+        data, truth = prior_facets(args.facets, SEED)
+    else:
+        data = paper60_facets(args.cache)
+    n = len(data.y)
 
     t0 = time.perf_counter()
-    post = sampling.sample_posterior(
-        data,
-        seed=CONFIG["seed"],
-        jobs=args.jobs,
-        n_ensembles=CONFIG["ensembles"],
-        n_walkers=CONFIG["walkers"],
-        burn=CONFIG["burn"],
-        min_tau_multiple=CONFIG["tau_multiple"],
-    )
+    post = sampling.sample_posterior(data, seed=SEED, jobs=args.jobs)
     t_batched = time.perf_counter() - t0
     g = post.draws[..., 0]  # (F, E, S)
-    conv = np.array(
-        [
-            az.rhat(x) < 1.01
-            and az.ess(x, method="bulk") >= 400
-            and az.ess(x, method="tail") >= 400
-            for x in g
-        ]
-    )
+    conv = np.array([gamma_converged(x) for x in g])
     rate_batched = conv.sum() / t_batched
 
+    # stock emcee on facets spread evenly over the set, one process
+    pick = np.linspace(0, n - 1, args.emcee_facets).round().astype(int)
     t0 = time.perf_counter()
-    stock = [
-        stock_emcee_facet(data.take([i]), CONFIG["seed"] + i) for i in range(args.emcee_facets)
-    ]
+    stock = [stock_emcee_facet(data.take([i]), SEED + int(i)) for i in pick]
     t_stock = time.perf_counter() - t0
     rate_stock = sum(ok for ok, _ in stock) / t_stock
 
-    q = np.quantile(g.reshape(len(g), -1), [0.05, 0.95], axis=1)
-    cover = float(np.mean((q[0] <= truth[:, 0]) & (truth[:, 0] <= q[1])))
     res = {
-        "facets": args.facets,
+        "facets_from": args.facets_from,
+        "facets": n,
         "jobs": args.jobs,
         "batched_seconds": t_batched,
         "batched_converged": int(conv.sum()),
@@ -156,21 +209,31 @@ def main(argv=None) -> dict:
         "stock_converged_per_s": rate_stock,
         "ratio": rate_batched / rate_stock,
         "median_steps_batched": float(np.median(post.n_steps)),
+        "capped_batched": int(np.sum(post.n_steps >= PROTOCOL["max_steps"])),
         "median_steps_stock": float(np.median([s for _, s in stock])),
-        "gamma_90_coverage": cover,
+        "median_steps_batched_same_facets": float(np.median(post.n_steps[pick])),
     }
+    if truth is not None:
+        q = np.quantile(g.reshape(n, -1), [0.05, 0.95], axis=1)
+        res["gamma_90_coverage"] = float(np.mean((q[0] <= truth[:, 0]) & (truth[:, 0] <= q[1])))
     print(
-        f"batched: {conv.sum()}/{args.facets} converged in {t_batched:.1f} s = "
-        f"{rate_batched:.1f} converged facets/s ({args.jobs} processes)"
+        f"[{args.facets_from}] batched: {conv.sum()}/{n} converged in {t_batched:.1f} s = "
+        f"{rate_batched:.1f} converged facets/s ({args.jobs} processes); "
+        f"median steps {res['median_steps_batched']:.0f}, {res['capped_batched']} at the cap"
     )
     print(
         f"stock emcee: {res['stock_converged']}/{args.emcee_facets} converged in "
-        f"{t_stock:.1f} s = {rate_stock:.2f} converged facets/s (1 process)"
+        f"{t_stock:.1f} s = {rate_stock:.2f} converged facets/s (1 process); "
+        f"median steps {res['median_steps_stock']:.0f} "
+        f"(batched on the same facets: {res['median_steps_batched_same_facets']:.0f})"
     )
-    print(f"ratio {res['ratio']:.0f}x; gamma 90 % interval coverage {cover:.3f}")
+    line = f"ratio {res['ratio']:.0f}x"
+    if truth is not None:
+        line += f"; gamma 90 % interval coverage {res['gamma_90_coverage']:.3f}"
+    print(line)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_sampling.json").write_text(json.dumps(res, indent=2))
+    (out / f"bench_sampling_{args.facets_from}.json").write_text(json.dumps(res, indent=2))
     return res
 
 
