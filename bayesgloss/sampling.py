@@ -24,12 +24,24 @@ alone, 29 with (0.5, 0.4, 0.1) and 21-23 with DE-dominated mixes. The randomness
 ``numpy.random.Generator``; problems never share walkers, so each problem's
 chain is exactly what emcee would produce for it with the same moves.
 
-:func:`sample_posterior` drives it: a vectorised start (least squares on
-the exponent grid, walkers spread over the profile likelihood of n), burn-in,
-then production until every problem has run at least ``min_tau_multiple``
-integrated autocorrelation times (emcee's estimator: walker-averaged
-autocorrelation, Sokal's window c = 5), and several independent ensembles per
-facet so that R-hat is meaningful. Diagnostics come from ArviZ.
+:func:`sample_posterior` drives it, per facet:
+
+1. what it samples: for Gaussian noise with a linear camera, sigma is
+   integrated out exactly (:func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`)
+   and drawn afterwards from its conditional posterior, so the ensembles
+   explore (gamma, log n, log s) only; facets whose curves leave a relative
+   rms below 5 % are sampled in :class:`RidgeCoordinates`, which straighten
+   the thin curved ridge along log n that low noise makes (on prior draws,
+   the 90th percentile of the autocorrelation time fell from 66 to 35
+   steps, and facets stopped at the step cap from 8 % to 1 %);
+2. a vectorised start (least squares on the exponent grid, walkers spread
+   over the profile likelihood of n);
+3. burn-in of at least 5 autocorrelation times;
+4. production until the run is at least ``min_tau_multiple`` integrated
+   autocorrelation times (emcee's estimator: walker-averaged autocorrelation,
+   Sokal's window c = 5, pooled over the facet's ensembles) and ArviZ finds
+   gamma converged across several independent ensembles (R-hat < 1.01, bulk
+   and tail ESS >= 400), or to the step cap, flagged.
 """
 
 from __future__ import annotations
@@ -47,6 +59,7 @@ __all__ = [
     "initial_ensemble",
     "sample_posterior",
     "PosteriorSamples",
+    "RidgeCoordinates",
     "DEFAULT_MOVES",
 ]
 
@@ -464,10 +477,12 @@ class PosteriorSamples:
     Attributes
     ----------
     draws : ndarray (F, E, S, P)
-        F facets, E ensembles, S draws each (steps thinned, walkers
-        interleaved), P parameters (:func:`likelihood.PARAMETERS`).
+        F facets, E ensembles, S draws each (each walker's trajectory
+        thinned evenly, walkers one after another), P parameters (:func:`likelihood.PARAMETERS`).
     tau : ndarray (F, E, P)
-        Integrated autocorrelation times [steps].
+        Integrated autocorrelation times [steps], pooled over the facet's
+        ensembles (the same value for each); NaN for log sigma when it was
+        integrated out and drawn afterwards.
     n_steps : ndarray (F,)
         Production steps run.
     acceptance : ndarray (F, E)
