@@ -10,6 +10,8 @@ A model is a reflectance model crossed with an illumination model
 - ``level="object"``: one material for the whole object: one gamma, lobe
   width, scale s (albedo times exposure) and noise scale shared by every
   facet, so that one facet's curve can be predicted from the others'.
+  Several objects of equal facet count (``object_size``, consecutive facets
+  of the data) are independent problems of one batch.
 
 Reflectance models (:data:`REFLECTANCE_MODELS`), on the bases of
 :mod:`bayesgloss.render` and the likelihood of :mod:`bayesgloss.likelihood`:
@@ -117,6 +119,10 @@ class ComparisonModel:
     level : {"facet", "object"}
     data : likelihood.CurveData
         F facets; for ``"ward"`` the table's ``log_n`` is log alpha.
+    facet_ids : ndarray (F,), optional
+    object_size : int, optional
+        Object level: facets per object; the F facets are F / object_size
+        objects of consecutive facets (default: all F facets one object).
     """
 
     reflectance: str
@@ -124,6 +130,12 @@ class ComparisonModel:
     level: str
     data: lk.CurveData = field(repr=False)
     facet_ids: np.ndarray | None = field(default=None, repr=False)
+    object_size: int | None = None
+
+    def __post_init__(self):
+        f = len(self.data.y)
+        if self.object_size is not None and (self.object_size < 1 or f % self.object_size):
+            raise ValueError(f"object_size {self.object_size} does not divide {f} facets")
 
     @property
     def name(self) -> str:
@@ -145,9 +157,15 @@ class ComparisonModel:
         return len(self.free)
 
     @property
+    def facets_per_object(self) -> int:
+        """Facets of one object (object level)."""
+        return len(self.data.y) if self.object_size is None else int(self.object_size)
+
+    @property
     def n_problems(self) -> int:
-        """Independent problems: F facets, or one object."""
-        return len(self.data.y) if self.level == "facet" else 1
+        """Independent problems: F facets, or the objects."""
+        f = len(self.data.y)
+        return f if self.level == "facet" else f // self.facets_per_object
 
     @property
     def log_prior_constant(self) -> float:
@@ -168,35 +186,37 @@ class ComparisonModel:
         return out
 
     def _facets(self, theta) -> np.ndarray:
-        """theta (B, K, P) -> full parameters per facet (F, K', 4)."""
+        """theta (B, K, P) -> full parameters per facet (F, K, 4): an object's
+        parameters repeated for each of its facets."""
         full = self.full(theta)
         if self.level == "facet":
             return full
-        f = len(self.data.y)
-        return np.broadcast_to(full.reshape(1, -1, 4), (f, full.shape[0] * full.shape[1], 4))
+        return np.repeat(full, self.facets_per_object, axis=0)
 
     def log_prior(self, theta) -> np.ndarray:
         """Normalised log prior density of the free parameters, (B, K)."""
         th = np.asarray(theta, dtype=float)
         full = self.full(th)
-        data = self.data if self.level == "facet" else self.data.take([0])
+        if self.level == "facet":
+            data = self.data
+        else:  # one prior centre of log s per object (comparison_model)
+            data = self.data.take(np.arange(0, len(self.data.y), self.facets_per_object))
         return lk.log_prior(full, data) + self.log_prior_constant
 
     def log_likelihood(self, theta, pointwise: bool = False) -> np.ndarray:
         """Log likelihood, (B, K); pointwise (F, K, T) per frame (facet level)
-        or (1, K, F) per facet (object level)."""
+        or (B, K, m) per facet of each object of m facets (object level)."""
         th = np.asarray(theta, dtype=float)
         b, k = th.shape[:2]
+        m = self.facets_per_object
         with np.errstate(all="ignore"):
-            if self.level == "facet":
-                ll = lk.log_likelihood(self._facets(th), self.data, pointwise=pointwise)
-                return np.nan_to_num(ll, nan=-np.inf)
-            full = self._facets(th)
-            if pointwise:
-                ll = lk.log_likelihood(full, self.data, pointwise=True).sum(-1)  # (F, B*K)
-                return np.nan_to_num(ll.T.reshape(b, k, -1), nan=-np.inf)
-            ll = lk.log_likelihood(full, self.data).sum(0)
-            return np.nan_to_num(ll.reshape(b, k), nan=-np.inf)
+            ll = lk.log_likelihood(self._facets(th), self.data, pointwise=pointwise)
+            if self.level == "object":
+                if pointwise:  # a facet's frames summed into one term
+                    ll = ll.sum(-1).reshape(b, m, k).transpose(0, 2, 1)
+                else:
+                    ll = ll.reshape(b, m, k).sum(1)
+            return np.nan_to_num(ll, nan=-np.inf)
 
     def log_posterior(self, theta, beta=1.0) -> np.ndarray:
         """log prior + beta x log likelihood, (B, K); -inf outside the prior."""
@@ -213,9 +233,10 @@ class ComparisonModel:
         """Starting walkers (B, W, P) near the optimum (least squares on the table)."""
         start = sampling.initial_ensemble(self.data, n_walkers, rng)  # (F, W, 4)
         if self.level == "object":
-            pool = start.reshape(-1, 4)
-            start = pool[rng.choice(len(pool), n_walkers, replace=False)][None]
-            spread = np.log(np.exp(start[..., 3]) + np.std(pool[:, 3]))
+            pool = start.reshape(self.n_problems, -1, 4)  # every object's facets' walkers
+            pick = np.stack([rng.choice(pool.shape[1], n_walkers, replace=False) for _ in pool])
+            start = np.take_along_axis(pool, pick[..., None], axis=1)
+            spread = np.log(np.exp(start[..., 3]) + np.std(pool[..., 3], axis=1, keepdims=True))
             start[..., 3] = np.clip(spread, *(np.array(self.data.priors.log_sigma) + [1e-6, -1e-6]))
         if self.reflectance == "phong":
             start[..., 0] = 1.0
@@ -235,13 +256,15 @@ def comparison_model(
     censored=None,
     noise: str = "relative",
     priors: lk.Priors | None = None,
+    object_size: int | None = None,
 ) -> ComparisonModel:
     """A model from observations and bases (Phong bases, or Ward bases for
     ``"lambert+ward"``, whose table's ``exponents`` hold alpha).
 
     For ``"lambert+ward"`` the prior of log alpha is set to the table's
-    range; the object level uses one prior centre of log s, the median of
-    the facets' data-based centres.
+    range; the object level uses one prior centre of log s per object, the
+    median of its facets' data-based centres. ``object_size`` (object
+    level): facets per object, consecutive in ``y`` (default: one object).
     """
     _check("reflectance model", reflectance, REFLECTANCE_MODELS)
     _check("level", level, LEVELS)
@@ -249,10 +272,13 @@ def comparison_model(
     table = np.log(np.asarray(bases.exponents, dtype=float))
     priors = replace(priors, log_n=(float(table[0]), float(table[-1])))
     data = lk.curve_data(y, valid, bases, censored=censored, noise=noise, priors=priors)
+    model = ComparisonModel(reflectance, illumination, level, data, object_size=object_size)
     if level == "object":
-        center = float(np.median(data.log_s_center))
-        data = replace(data, log_s_center=np.full(len(data.y), center))
-    return ComparisonModel(reflectance, illumination, level, data)
+        m = model.facets_per_object
+        center = np.median(data.log_s_center.reshape(-1, m), axis=1)
+        data = replace(data, log_s_center=np.repeat(center, m))
+        model = replace(model, data=data)
+    return model
 
 
 def _daylight(b, illumination: str):
@@ -356,6 +382,10 @@ class ModelFit:
     rhat, tau : ndarray
         Split R-hat of every parameter (B, P) (ArviZ, ensembles as chains)
         and integrated autocorrelation times (B, E, P) [steps].
+    n_steps : int
+        Production steps run.
+    min_tau_multiple : float
+        Production steps needed per integrated autocorrelation time.
     """
 
     model: ComparisonModel = field(repr=False)
@@ -364,10 +394,20 @@ class ModelFit:
     valid: np.ndarray
     rhat: np.ndarray
     tau: np.ndarray
+    n_steps: int = 0
+    min_tau_multiple: float = 50.0
 
     def converged(self) -> np.ndarray:
-        """R-hat < 1.01 for every parameter, per problem (B,)."""
-        return np.all(self.rhat < estimate.RHAT_MAX, axis=-1)
+        """Per problem (B,): R-hat < 1.01 for every parameter and a production
+        run of at least ``min_tau_multiple`` autocorrelation times of every
+        parameter in every ensemble (emcee's rule of thumb, as
+        :func:`bayesgloss.sampling.sample_posterior`)."""
+        return _converged(self.rhat, self.tau, self.n_steps, self.min_tau_multiple)
+
+
+def _converged(rhat, tau, n_steps, multiple) -> np.ndarray:
+    long = n_steps >= multiple * np.nan_to_num(np.max(tau, axis=1), nan=np.inf)  # (B, P)
+    return np.all((rhat < estimate.RHAT_MAX) & long, axis=-1)
 
 
 def fit_model(
@@ -377,6 +417,8 @@ def fit_model(
     n_walkers: int = 16,
     burn: int = 500,
     steps: int = 1500,
+    max_steps: int | None = None,
+    min_tau_multiple: float = 50.0,
     draws_per_ensemble: int = 400,
     seed=0,
 ) -> ModelFit:
@@ -384,13 +426,22 @@ def fit_model(
 
     All problems and ensembles advance in one batch (emcee's stretch and
     differential-evolution moves, :class:`bayesgloss.sampling.BatchedEnsemble`);
-    ``burn`` steps are discarded and ``steps`` kept, thinned evenly to
-    ``draws_per_ensemble`` draws (walkers one after the other).
+    ``burn`` steps are discarded and at least ``steps`` kept; the run then
+    goes on in chunks of ``steps`` while any problem is not converged
+    (:meth:`ModelFit.converged`: R-hat < 1.01 and a run of at least
+    ``min_tau_multiple`` integrated autocorrelation times, the rule of
+    :func:`bayesgloss.sampling.sample_posterior`), up to ``max_steps``. The
+    production run is thinned evenly to ``draws_per_ensemble`` draws
+    (walkers one after the other). Problems still not converged at
+    ``max_steps`` are flagged by :meth:`ModelFit.converged`.
 
     Parameters
     ----------
     model : ComparisonModel
     n_ensembles, n_walkers, burn, steps, draws_per_ensemble : int
+    max_steps : int, optional
+        Production steps at most (default ``steps``: a fixed-length run).
+    min_tau_multiple : float
     seed : int or numpy.random.Generator
     """
     import arviz as az
@@ -398,30 +449,43 @@ def fit_model(
     rng = np.random.default_rng(seed)
     e, w, p = n_ensembles, n_walkers, model.n_params
     b = model.n_problems
+    max_steps = steps if max_steps is None else max(int(max_steps), steps)
     start = np.concatenate([model.initial(w, rng) for _ in range(e)])  # (E*B, W, P)
 
     def log_prob(th):
         return _unfold(model.log_posterior(_fold(th, e)), e)
 
+    def rhat_of(d):  # d (B, E, S, P)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ds = az.convert_to_dataset({"theta": d.transpose(1, 2, 0, 3)})  # (E, S, B, P)
+            return np.asarray(az.rhat(ds)["theta"].values).reshape(b, p)
+
+    def thinned(chain):
+        n = len(chain)
+        per = max(1, draws_per_ensemble // w)
+        idx = np.linspace(0, n - 1, per).round().astype(int)
+        return chain[idx].reshape(per, e, b, w, p).transpose(2, 1, 3, 0, 4).reshape(b, e, -1, p)
+
     ens = sampling.BatchedEnsemble(log_prob, rng=rng)
     chain, lps, _ = ens.run(start, burn)
-    chain, _, _ = ens.run(chain[-1], steps, lps[-1])  # (N, E*B, W, P)
-    tau = sampling.integrated_time(chain).reshape(e, b, p).transpose(1, 0, 2)
-    per = max(1, draws_per_ensemble // w)
-    idx = np.linspace(0, steps - 1, per).round().astype(int)
-    d = chain[idx].reshape(per, e, b, w, p).transpose(2, 1, 3, 0, 4).reshape(b, e, w * per, p)
+    chain, lps, _ = ens.run(chain[-1], steps, lps[-1])  # (N, E*B, W, P)
+    while True:
+        tau = sampling.integrated_time(chain).reshape(e, b, p).transpose(1, 0, 2)
+        d = thinned(chain)
+        rhat = rhat_of(d)
+        if len(chain) >= max_steps or np.all(_converged(rhat, tau, len(chain), min_tau_multiple)):
+            break
+        more, lp_more, _ = ens.run(chain[-1], min(steps, max_steps - len(chain)), lps[-1])
+        chain, lps = np.concatenate([chain, more]), np.concatenate([lps, lp_more])
     s = d.shape[2]
     ll = model.log_likelihood(d.reshape(b, e * s, p), pointwise=True)
     ll = ll.reshape(ll.shape[0], e, s, -1)
     if model.level == "object":
-        valid = np.ones((1, ll.shape[-1]), dtype=bool)
+        valid = np.ones((b, ll.shape[-1]), dtype=bool)
     else:
         valid = model.data.valid
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        ds = az.convert_to_dataset({"theta": d.transpose(1, 2, 0, 3)})  # (E, S, B, P)
-        rhat = np.asarray(az.rhat(ds)["theta"].values).reshape(b, p)
-    return ModelFit(model, d, ll, valid, rhat.reshape(b, p), tau)
+    return ModelFit(model, d, ll, valid, rhat, tau, len(chain), min_tau_multiple)
 
 
 # --------------------------------------------------------------------------
@@ -467,6 +531,8 @@ def loo_compare(fits: dict, *, problem: int | None = None) -> dict:
         if problem is not None:
             terms = ll[problem][..., valid[problem]]
         elif fit.model.level == "object":
+            if fit.model.n_problems > 1:
+                raise ValueError("several objects: compare one at a time (problem=...)")
             terms = ll[0]
         else:
             terms = np.moveaxis(ll, 0, 2)[..., valid]  # (E, S, valid (facet, frame))
@@ -1012,9 +1078,11 @@ def compare_bundle_quick(
 ) -> dict:
     """:func:`compare_bundle` with the command line's run lengths: ``steps``
     kept per fit (a third more as burn-in, at least 100) and ``rungs``
-    temperature rungs of 8 walkers for the evidence."""
+    temperature rungs of 8 walkers for the evidence; each fit goes on to 50
+    autocorrelation times and R-hat < 1.01, up to 4 x ``steps``."""
     opts = {"steps": steps, "burn": max(100, steps // 3)}
     ev_opts = {**opts, "n_walkers": 8, "betas": power_ladder(rungs)}
+    opts["max_steps"] = 4 * steps  # fits go on to 50 tau (or are flagged)
     return compare_bundle(
         path,
         reflectance=reflectance,
@@ -1054,5 +1122,8 @@ def format_comparison(res: dict, name, level: str = "object") -> str:
     out.append(f"sky posterior (equal priors): {probs}")
     not_conv = [k for k, v in res["converged"].items() if not v]
     if not_conv:
-        out.append(f"not converged (R-hat >= 1.01): {', '.join(not_conv)}")
+        out.append(
+            f"WARNING: not converged (R-hat >= 1.01 or run < 50 autocorrelation times): "
+            f"{', '.join(not_conv)}"
+        )
     return "\n".join(out)
