@@ -213,11 +213,10 @@ def posterior_report(
         ax.fill_between(frames, lo, hi, color="tab:blue", alpha=0.25, label="90 % predictive")
         ax.plot(frames, mid, color="tab:blue", lw=1.5, label="predictive median")
         ax.plot(frames, y[k], "ko", ms=4, label="observed")
-        ax.set(
-            title=f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{q05[k]:.2f}, {q95[k]:.2f}]",
-            xlabel="frame",
-            ylabel=f"luminance [{summary.get('unit', 'relative')}]",
+        ax.set_title(
+            f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{q05[k]:.2f}, {q95[k]:.2f}]", fontsize=9
         )
+        ax.set(xlabel="frame", ylabel=f"luminance [{summary.get('unit', 'relative')}]")
         if j == 0:
             ax.legend(fontsize=8)
 
@@ -232,8 +231,8 @@ def posterior_report(
         xscale="log",
         xlabel="bulk ESS of gamma",
         ylabel="R-hat of gamma",
-        title=f"(f) convergence: {conv.sum()}/{len(conv)} facets (green)",
     )
+    ax.set_title(f"(f) converged: {conv.sum()}/{len(conv)} (green)", fontsize=9)
     _corner(fig, grid[2, :2], idata, pick[1], plt)
     _comparison_table(fig.add_subplot(grid[2, 2:]), comparison)
     fig.suptitle(
