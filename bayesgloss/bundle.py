@@ -634,6 +634,12 @@ class FacetCurves:
         Mean or median pixel luminance of each facet in each frame, over its
         finite, unsaturated pixels (NaN if none), in :attr:`unit`. Also given
         for invalid entries: use :attr:`valid` to leave those out.
+    lower_bound : ndarray (F, T)
+        The same statistic over the facet's finite pixels with saturated
+        pixels at their stored (top-code) value, in :attr:`unit`: a lower bound
+        of the facet's true luminance where pixels saturate, defined even when
+        every pixel does (NaN only without finite pixels); equal to
+        ``luminance`` where no pixel saturates.
     unit : str
         ``"cd m-2"`` for ``linear-radiance`` (179 x Radiance's luminance
         weighting of the radiance); ``"relative"`` for ``linear``, ``srgb``
@@ -663,6 +669,7 @@ class FacetCurves:
     ids: np.ndarray
     times: pd.DatetimeIndex
     luminance: np.ndarray
+    lower_bound: np.ndarray
     unit: str
     n_pixels: np.ndarray
     n_nonfinite: np.ndarray
@@ -772,7 +779,24 @@ def facet_curves(
         group_start = np.concatenate([[0], np.cumsum(n_pixels)[:-1]])
     scale = LUMINOUS_EFFICACY if bundle.pixel_encoding == "linear-radiance" else 1.0
 
+    def summary(y, bad):
+        """The statistic of each facet's pixels that are not ``bad`` (NaN if none)."""
+        good = n_pixels - np.bincount(facet, weights=bad, minlength=n_facets).astype(np.int64)
+        if statistic == "mean":
+            total = np.bincount(facet, weights=np.where(bad, 0.0, y), minlength=n_facets)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                return np.where(good > 0, total / np.maximum(good, 1), np.nan)
+        # sort within facets, bad pixels (NaN) last; median of the first `good`
+        key = np.where(bad, np.nan, y)
+        sorted_y = key[np.lexsort((key, facet))]
+        low = group_start + np.maximum(good - 1, 0) // 2
+        high = group_start + np.maximum(good, 0) // 2
+        safe = good > 0
+        med = 0.5 * (sorted_y[np.where(safe, low, 0)] + sorted_y[np.where(safe, high, 0)])
+        return np.where(safe, med, np.nan)
+
     luminance = np.full((n_facets, n_frames), np.nan)
+    lower_bound = np.full((n_facets, n_frames), np.nan)
     n_nonfinite = np.zeros((n_facets, n_frames), np.int64)
     n_saturated = np.zeros((n_facets, n_frames), np.int64)
     for t in range(n_frames):
@@ -784,20 +808,9 @@ def facet_curves(
         bad = nonfinite | saturated
         n_nonfinite[:, t] = np.bincount(facet, weights=nonfinite, minlength=n_facets)
         n_saturated[:, t] = np.bincount(facet, weights=saturated, minlength=n_facets)
-        good = n_pixels - np.bincount(facet, weights=bad, minlength=n_facets).astype(np.int64)
-        if statistic == "mean":
-            total = np.bincount(facet, weights=np.where(bad, 0.0, y), minlength=n_facets)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                luminance[:, t] = np.where(good > 0, total / np.maximum(good, 1), np.nan)
-        else:
-            # sort within facets, bad pixels (NaN) last; median of the first `good`
-            key = np.where(bad, np.nan, y)
-            sorted_y = key[np.lexsort((key, facet))]
-            low = group_start + np.maximum(good - 1, 0) // 2
-            high = group_start + np.maximum(good, 0) // 2
-            safe = good > 0
-            med = 0.5 * (sorted_y[np.where(safe, low, 0)] + sorted_y[np.where(safe, high, 0)])
-            luminance[:, t] = np.where(safe, med, np.nan)
+        luminance[:, t] = summary(y, bad)
+        # saturated pixels at their stored code: the true value is at least that
+        lower_bound[:, t] = summary(y, nonfinite) if saturated.any() else luminance[:, t]
 
     reasons = {
         "sun-below-horizon": ~bundle.sun_up[None, :],
@@ -818,6 +831,7 @@ def facet_curves(
         ids=ids.copy(),
         times=bundle.times,
         luminance=luminance,
+        lower_bound=lower_bound,
         unit=unit,
         n_pixels=n_pixels,
         n_nonfinite=n_nonfinite,

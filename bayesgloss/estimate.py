@@ -86,15 +86,18 @@ def bundle_bases(
 def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(y, usable, censored) from a bundle's facet curves.
 
-    Entries flagged only ``saturated`` enter as censored: the mean of a
-    facet's unsaturated pixels is a lower bound of its true mean. Every other
-    flag leaves the entry out.
+    Entries flagged only ``saturated`` enter as censored, at the facet's
+    statistic with its saturated pixels at the top code
+    (:attr:`bayesgloss.bundle.FacetCurves.lower_bound`), a lower bound of
+    its true value, also where every pixel of the facet saturates. Every
+    other flag leaves the entry out.
     """
     sat_bit = 1 << bundle_io.FLAG_REASONS.index("saturated")
     only_saturated = curves.flag_bits == sat_bit
-    censored = only_saturated & np.isfinite(curves.luminance)
+    censored = only_saturated & np.isfinite(curves.lower_bound)
     usable = curves.valid | censored
-    return np.where(usable, curves.luminance, 0.0), usable, censored
+    y = np.where(censored, curves.lower_bound, curves.luminance)
+    return np.where(usable, y, 0.0), usable, censored
 
 
 @dataclass

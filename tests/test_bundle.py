@@ -941,6 +941,37 @@ def test_saturated_pixels_reported(tmp_path, statistic):
     assert curves.luminance[3, 2] == pytest.approx(summary(y[good]), rel=1e-6)
     reference = _reference_curves(linear, labels, facets.ids, statistic)
     np.testing.assert_allclose(curves.luminance[curves.valid], reference[curves.valid], rtol=1e-6)
+    # the lower bound keeps the saturated pixels at their stored codes
+    assert curves.lower_bound[3, 2] == pytest.approx(summary(y[labels == 4]), rel=1e-6)
+    np.testing.assert_array_equal(curves.lower_bound[curves.valid], curves.luminance[curves.valid])
+
+
+@pytest.mark.parametrize("statistic", ["mean", "median"])
+def test_lower_bound_of_a_facet_saturated_in_every_pixel(tmp_path, statistic):
+    # no unsaturated pixel is left: luminance is NaN, the lower bound the
+    # linear value of the stored codes (here sRGB: top code 1, one channel 0.5)
+    rng = np.random.default_rng(14)
+    facets, labels, frames = _scene(rng)
+    frames = [np.rint(np.clip(f, 0, 0.9) * 255).astype(np.uint8) for f in frames]
+    frames[1][labels == 2] = [255, 255, 255]
+    frames[2][labels == 3] = [255, 128, 255]
+    path = bd.write_bundle(
+        tmp_path / "sat",
+        site=(40, 0),
+        camera_position=(-10, 0, 2),
+        pixel_encoding="srgb",
+        frames=frames,
+        times=DAY_TIMES,
+        facets=facets,
+        labels=labels,
+        frame_format="png8",
+    )
+    curves = bd.facet_curves(path, statistic=statistic)
+    assert curves.flags[1, 1] == "saturated" and curves.flags[2, 2] == "saturated"
+    assert np.isnan(curves.luminance[1, 1]) and np.isnan(curves.luminance[2, 2])
+    assert curves.lower_bound[1, 1] == pytest.approx(1.0, rel=1e-6)
+    expected = bd.srgb_to_linear(np.array([255, 128, 255]) / 255) @ WEIGHTS
+    assert curves.lower_bound[2, 2] == pytest.approx(expected, rel=1e-6)
 
 
 def test_tiny_facets_reported(tmp_path):
