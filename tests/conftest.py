@@ -72,13 +72,42 @@ def smooth_sky():
 
 
 def make_synthetic_bundle(
-    path, *, specularity=0.5, view="SW", noise=0.01, seed=0, n_rings=2, n_segments=8, block=3
+    path,
+    *,
+    specularity=0.5,
+    view="SW",
+    noise=0.01,
+    seed=0,
+    n_rings=2,
+    n_segments=8,
+    block=3,
+    encoding=None,
+    response_gamma=2.2,
+    bits=16,
+    exposure=None,
 ):
     """A small sequence bundle made by the forward model, no Radiance needed.
 
     Every facet facing the camera gets a block x block patch of the label image;
     its frames hold the facet's predicted radiance (grey plastic of the given
     specularity under gensky's clear sky) with relative noise.
+
+    Parameters
+    ----------
+    encoding : None or {"unknown", "linear", "srgb", "gamma:G"}
+        None (default): float32 TIFF frames of radiance, ``linear-radiance``.
+        Otherwise integer PNG frames of ``bits`` bits whose codes are the noisy
+        radiance divided by ``exposure`` and passed through the camera
+        response (the sRGB curve, value^(1/G), or value^(1/response_gamma)
+        for ``unknown``), rounded to the nearest code; values at or above
+        ``exposure`` clip to the top code (saturated pixels).
+    response_gamma : float
+        True response exponent g of an ``unknown`` encoding [-].
+    bits : {8, 16}
+        Bit depth of integer frames [-].
+    exposure : float, optional
+        Radiance that maps to the top code [W sr^-1 m^-2]; default 1.25 x the
+        brightest noisy facet radiance (nothing clips).
     """
     from bayesgloss import bundle, geometry, render, scene
 
@@ -102,17 +131,42 @@ def make_synthetic_bundle(
         labels[sl] = fid
         for t, fr in enumerate(frames):
             fr[sl] = radiance[k, t]
+    pixel_encoding, frame_format = "linear-radiance", "tiff"
+    if encoding is not None:
+        if bits not in (8, 16):
+            raise ValueError(f"bits must be 8 or 16, got {bits!r}")
+        top = 1.25 * float(radiance.max()) if exposure is None else float(exposure)
+        frames = [_encode_codes(fr / top, encoding, response_gamma) for fr in frames]
+        pixel_encoding, frame_format = encoding, f"png{bits}"
     bundle.write_bundle(
         path,
         site={"latitude": 40.0, "longitude": 0.0, "elevation": 0.0},
         camera_position=seq.camera_position,
-        pixel_encoding="linear-radiance",
+        pixel_encoding=pixel_encoding,
         frames=frames,
         times=[t.isoformat() for t in seq.times],
         facets=geometry.Facets(facets.ids, facets.normal, facets.center),
         labels=labels,
         ground_reflectance=0.2,
         truth={"specularity": specularity, "material": "plastic"},
-        frame_format="tiff",
+        frame_format=frame_format,
     )
     return path
+
+
+def _encode_codes(value, encoding, response_gamma):
+    """Normalised code values in [0, 1] of linear values (1 = top code) under a
+    camera response; write_bundle rounds them to the nearest integer code."""
+    from bayesgloss import images
+
+    name, gamma = images.parse_pixel_encoding(encoding)
+    v = np.clip(np.asarray(value, dtype=float), 0.0, 1.0)
+    if name == "srgb":
+        v = images.linear_to_srgb(v)
+    elif name == "gamma":
+        v = v ** (1.0 / gamma)
+    elif name == "unknown":
+        v = v ** (1.0 / response_gamma)
+    elif name != "linear":
+        raise ValueError(f"integer frames cannot have pixel encoding {encoding!r}")
+    return v

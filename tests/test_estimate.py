@@ -148,3 +148,145 @@ def test_estimate_cli_json_on_a_rendered_bundle(tmp_path):
     ):
         assert group in idata.groups()
     assert idata.log_likelihood["y"].dims[-2:] == ("facet", "frame")
+
+
+# ---------------------------------------------------------------------------
+# end to end on synthetic bundles: unknown camera response, censored pixels
+# ---------------------------------------------------------------------------
+
+
+def _fresnel_truth(b, specularity=0.5):
+    """The object's true gloss as the forward model made it.
+
+    make_synthetic_bundle renders grey (0.5) Radiance plastic of roughness 0
+    with render.radiance_material_prediction, whose mirror part carries
+    Radiance's Fresnel raise at each facet's view angle: the true gamma is
+    reflectance.gloss_of_radiance_material_fresnel per facet, averaged over
+    the facets (as studies/recovery_paper60.py scores Radiance renderings).
+    """
+    from bayesgloss import reflectance
+
+    cos_view = b.view_geometry().cos_view
+    return float(
+        np.mean(
+            reflectance.gloss_of_radiance_material_fresnel("plastic", specularity, 0.5, cos_view)
+        )
+    )
+
+
+@pytest.fixture(scope="module")
+def unknown_response_bundle(tmp_path_factory):
+    from conftest import make_synthetic_bundle
+
+    # 16-bit codes = (radiance / exposure)^(1 / 2.2), nothing clipped (the
+    # default exposure is 1.25 x the brightest facet), encoding "unknown"
+    return make_synthetic_bundle(
+        tmp_path_factory.mktemp("unknown") / "b",
+        specularity=0.5,
+        encoding="unknown",
+        response_gamma=2.2,
+        bits=16,
+    )
+
+
+def test_unknown_response_recovered_end_to_end(unknown_response_bundle):
+    from bayesgloss import bundle, estimate
+
+    b = bundle.read_bundle(unknown_response_bundle)
+    assert not b.response_known
+    truth = _fresnel_truth(b)  # 0.711 for these 8 facets
+    res = estimate.estimate_bundle(b, camera="auto", seed=0)
+    assert res.summary["camera"] == "power"
+    assert res.summary["object"]["facets_converged"] == res.summary["object"]["facets"] == 8
+
+    g = res.idata.posterior["g"].values  # (chains, draws, facets)
+    g = g.reshape(-1, g.shape[-1])
+    lo, med, hi = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
+    held = (lo <= 2.2) & (2.2 <= hi)
+    # measured (seeds 0-2 of the data): 6-7 of 8 facets' 90 % intervals hold
+    # 2.2; the two that miss do so by < 0.04 in every seed, a model mismatch
+    # (Radiance plastic's Fresnel-reduced diffuse vs. the Lambert basis) that
+    # g partly absorbs on the facets with the narrowest intervals. At least 5
+    # of 8: with honest 90 % intervals P(<= 4 of 8) = 0.5 %.
+    assert held.sum() >= 5, (lo, hi)
+    # median of facet medians, measured 2.16-2.17: its sampling sd is ~0.02
+    # (facet posterior sd ~0.07 over 8 facets) and the mismatch above pulls it
+    # ~0.03 low; 0.1 is ~3 such sds past that and still excludes g = 1 (linear)
+    # and the prior median sqrt(3) = 1.73
+    assert abs(np.median(med) - 2.2) < 0.1, med
+
+    gam = res.summary["object"]["gamma"]  # measured [0.700, 0.740], median 0.722
+    assert gam["q05"] <= truth <= gam["q95"], (gam, truth)
+
+    # the response matters: the same codes taken as linear values (g = 1,
+    # the response ignored) give a curve shape the Lambert-plus-lobe model
+    # can only match with far more gloss: measured [0.893, 0.938], biased up
+    # by ~0.2, the interval's lower end 0.18 above the truth
+    lin = estimate.estimate_bundle(b, camera="linear", seed=0).summary["object"]["gamma"]
+    assert lin["q05"] > truth + 0.1, (lin, truth)
+
+
+@pytest.fixture(scope="module")
+def clipped_bundle(tmp_path_factory):
+    from conftest import make_synthetic_bundle
+
+    # 16-bit gamma:2.2 codes with the top code at 25 W sr^-1 m^-2, about 40 %
+    # of the brightest facet's peak (63) and below every facet's peak (34-63):
+    # the broad sky-mirror highlights of all 8 facets clip, in 5-9 frames
+    # each (58 of the 120 sunlit entries)
+    return make_synthetic_bundle(
+        tmp_path_factory.mktemp("clipped") / "b",
+        specularity=0.5,
+        encoding="gamma:2.2",
+        bits=16,
+        exposure=25.0,
+    )
+
+
+def test_observations_censor_facets_saturated_in_every_pixel(clipped_bundle):
+    # every pixel of a clipped facet is at the top code (the synthetic facets
+    # are uniform): the entry must enter censored at the top code's linear
+    # value (1), not be dropped for want of unsaturated pixels
+    from bayesgloss import bundle, estimate
+
+    curves = bundle.facet_curves(clipped_bundle)
+    sat = curves.flagged("saturated")
+    assert sat.sum() == 58 and sat.any(axis=1).all()
+    assert np.all(curves.n_saturated[sat] == curves.n_pixels[np.nonzero(sat)[0]])
+    y, usable, censored = estimate.observations(curves)
+    np.testing.assert_array_equal(censored, sat)
+    np.testing.assert_array_equal(usable, curves.valid | sat)
+    np.testing.assert_allclose(y[censored], 1.0)
+    assert np.all(y[curves.valid] < 1.0)
+
+
+def test_censored_highlights_end_to_end(clipped_bundle, monkeypatch):
+    from bayesgloss import bundle, estimate
+
+    b = bundle.read_bundle(clipped_bundle)
+    truth = _fresnel_truth(b)
+    res = estimate.estimate_bundle(b, seed=0)
+    assert res.summary["camera"] == "linear"
+    assert int(res.idata.observed_data["censored"].sum()) == 58
+    obj = res.summary["object"]
+    assert obj["facets_converged"] == obj["facets"] == 8
+    # measured [0.699, 0.744], median 0.723 (truth 0.711); the uncensored
+    # float bundle of the same seed gives [0.681, 0.732]
+    assert obj["gamma"]["q05"] <= truth <= obj["gamma"]["q95"], (obj["gamma"], truth)
+
+    # the same data with the clipped entries taken as exact values (the top
+    # code): the flattened peaks bias gamma up, measured [0.764, 0.807],
+    # median 0.788; 0.03 is ~1.5 interval half-widths clear of the truth.
+    # (Leaving the clipped entries out instead is unbiased here, measured
+    # [0.708, 0.750]: the unclipped flanks of the broad highlights still fix
+    # the lobe; censoring is the model that uses every entry without bias.)
+    observe = estimate.observations
+
+    def exact(curves):
+        y, usable, _ = observe(curves)
+        return y, usable, np.zeros_like(usable)
+
+    monkeypatch.setattr(estimate, "observations", exact)
+    naive = estimate.estimate_bundle(b, seed=0).summary["object"]["gamma"]
+    assert naive["q05"] > truth + 0.03, (naive, truth)
+    assert naive["median"] > obj["gamma"]["median"] + 0.03
