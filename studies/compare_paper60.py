@@ -6,14 +6,29 @@ reflectance model at relative noise sigma = 0.05; every candidate model's
 evidence by thermodynamic integration; the decision is the model of highest
 evidence. Replicates: facets x noise seeds.
 
+Part ``objects``: the same question at the object level (one material for
+all of an object's facets, ``level="object"``), the way a user asks "Phong
+or Ward?" of one object. A replicate is one object: a random subset of
+``object_facets`` of the facets that one of the paper's five views sees
+(cos view > 0.2) and the sun lights at some hour, from the analytic scene
+(:func:`bayesgloss.scene.paper_sequence`, gensky clear sky, sun-up frames);
+``objects_per_view`` subsets per view. Data are simulated from each
+generating model at relative noise sigma = 0.05 with the material of a
+parameter set (two sets: lobes matched in width by n = 2 / alpha^2 - 2,
+so that Phong and Ward differ in shape only); every candidate's evidence by
+thermodynamic integration and its PSIS-LOO (leave-one-facet-out) are
+recorded; decisions: highest evidence, highest elpd_loo, and the
+one-standard-error LOO rule (:func:`bayesgloss.compare.select_parsimonious`).
+
 Part ``paper60``: each Radiance sequence compared at the object level
 (one material for all facets) across reflectance {lambert, lambert+phong}
 and skies {gensky-clear, gensky-intermediate}: is the matt object Lambertian,
 the glossy one not, and which sky made it (posterior probabilities with equal
 priors, evidence summed over the two reflectance models); confusion table.
 
-Usage: python studies/compare_paper60.py [simulated|paper60] [--cache /tmp/paper60]
-Writes studies/results/compare_simulated_noise<sigma>.json, compare_paper60.json.
+Usage: python studies/compare_paper60.py [simulated|objects|paper60] [--cache /tmp/paper60]
+Writes studies/results/compare_simulated_noise<sigma>.json,
+compare_objects_<set>_noise<sigma>.json, compare_paper60.json.
 """
 
 from __future__ import annotations
@@ -46,7 +61,35 @@ CONFIG = {
     "paper_evidence": {"burn": 300, "steps": 600, "n_walkers": 8, "n_rungs": 40},
     "paper_skies": ["gensky-clear", "gensky-intermediate"],
     "paper_reflectance": ["lambert", "lambert+phong"],
+    # part "objects"
+    "object_views": ["W", "SW", "S", "SE", "E"],
+    "objects_per_view": 6,
+    "object_facets": 15,
+    "object_log_s": float(np.log(0.5)),  # the paper's grey material colour
+    "object_truth": {
+        "A": {
+            "lambert": {"gamma": 0.0, "log_n": 0.0},
+            "phong": {"gamma": 1.0, "log_n": float(np.log(200.0))},
+            "lambert+phong": {"gamma": 0.5, "log_n": float(np.log(200.0))},
+            "lambert+ward": {"gamma": 0.5, "log_n": float(np.log(0.1))},
+        },
+        "B": {
+            "lambert": {"gamma": 0.0, "log_n": 0.0},
+            "phong": {"gamma": 1.0, "log_n": float(np.log(48.0))},
+            "lambert+phong": {"gamma": 0.3, "log_n": float(np.log(48.0))},
+            "lambert+ward": {"gamma": 0.3, "log_n": float(np.log(0.2))},
+        },
+    },
+    "object_evidence": {"burn": 200, "steps": 400, "n_walkers": 8, "n_rungs": 24},
+    "object_fit": {"burn": 300, "steps": 600, "n_walkers": 8, "n_ensembles": 4},
 }
+
+
+def binomial_lower(k: int, n: int, level: float = 0.95) -> float:
+    """One-sided Clopper-Pearson lower confidence bound of a proportion."""
+    from scipy import stats
+
+    return 0.0 if k == 0 else float(stats.beta.ppf(1 - level, k, n - k + 1))
 
 
 def _paths(cache):
@@ -111,6 +154,128 @@ def simulated(cache: str, out: Path, noise: float) -> dict:
         "rows": rows,
     }
     (out / f"compare_simulated_noise{noise:g}.json").write_text(json.dumps(res, indent=1))
+    return res
+
+
+def scene_objects(rng: np.random.Generator, views, per_view: int, size: int):
+    """Phong and Ward bases of ``per_view`` random objects of ``size`` facets
+    per view of the paper's scene (facets seen at cos view > 0.2 and sunlit
+    at some hour), stacked object after object; sun-up frames valid."""
+    from bayesgloss import render
+    from bayesgloss.scene import paper_sequence
+
+    phong, ward, ids = [], [], []
+    for view in views:
+        seq = paper_sequence(view=view, sky_model=CONFIG["sim_sky"])
+        g = seq.geometry
+        lit = (g.normal @ seq.sky.sun_direction.T).max(axis=1) > 0
+        cand = np.nonzero((g.cos_view > 0.2) & lit)[0]
+        geom = render.ViewGeometry(g.normal[cand], g.view_direction[cand])
+        ph = render.facet_bases(geom, seq.sky)
+        wd = render.ward_facet_bases(geom, seq.sky, diffuse=ph.diffuse)
+        up = seq.sky.sun_direction[:, 2] > 0
+        for _ in range(per_view):
+            pick = np.sort(rng.choice(len(cand), size, replace=False))
+            phong.append((ph.diffuse[pick], ph.glossy[pick]))
+            ward.append(wd.glossy[pick])
+            ids.append({"view": view, "facets": cand[pick].tolist()})
+    diffuse = np.concatenate([d for d, _ in phong])
+    bases = {
+        "phong": render.FacetBases(diffuse, np.concatenate([g for _, g in phong]), ph.exponents),
+        "ward": render.FacetBases(diffuse, np.concatenate(ward), wd.exponents),
+    }
+    valid = np.broadcast_to(up, diffuse.shape)
+    return bases, valid, ids
+
+
+def objects(out: Path, noise: float, parameter_set: str) -> dict:
+    """Object-level model choice on simulated objects (module docstring)."""
+    rng = np.random.default_rng([CONFIG["seed"], ord(parameter_set)])
+    size = CONFIG["object_facets"]
+    bases, valid, ids = scene_objects(rng, CONFIG["object_views"], CONFIG["objects_per_view"], size)
+    names = compare.REFLECTANCE_MODELS
+    n_params = {}
+
+    def model(r, y):
+        b = bases["ward" if r == "lambert+ward" else "phong"]
+        m = compare.comparison_model(
+            r, CONFIG["sim_sky"], y, valid, b, level="object", object_size=size
+        )
+        n_params[r] = m.n_params
+        return m
+
+    ev_opts = dict(CONFIG["object_evidence"])
+    betas = compare.power_ladder(ev_opts.pop("n_rungs"))
+    rows = []
+    for gen, truth in CONFIG["object_truth"][parameter_set].items():
+        gm = model(gen, np.maximum(bases["phong"].diffuse, 1e-3))
+        th = np.zeros((len(valid), 1, 4))
+        th[..., 0], th[..., 1] = truth["gamma"], truth["log_n"]
+        th[..., 2], th[..., 3] = CONFIG["object_log_s"], np.log(noise)
+        y = lk.simulate(th, gm.data, rng)[:, 0]
+        y = np.maximum(y, 1e-6 * y.max(1, keepdims=True))
+        log_z, se, fits = {}, {}, {}
+        for cand in names:
+            m = model(cand, y)
+            t0 = time.perf_counter()
+            ev = compare.model_evidence(m, seed=rng, betas=betas, **ev_opts)
+            t1 = time.perf_counter()
+            fits[cand] = compare.fit_model(m, seed=rng, **CONFIG["object_fit"])
+            log_z[cand], se[cand] = ev.log_z, ev.se
+            print(
+                f"{parameter_set} gen {gen:14s} cand {cand:14s} TI {t1 - t0:5.1f} s, "
+                f"fit {time.perf_counter() - t1:5.1f} s",
+                flush=True,
+            )
+        z = np.stack([log_z[n] for n in names])  # (M, objects)
+        for k, obj in enumerate(ids):
+            loo = compare.loo_compare(fits, problem=k)
+            table = loo["table"]
+            srt = np.sort(z[:, k])
+            rows.append(
+                {
+                    "generating": gen,
+                    "object": k,
+                    **obj,
+                    "chosen_evidence": names[int(np.argmax(z[:, k]))],
+                    "log_bf_best_vs_next": float(srt[-1] - srt[-2]),
+                    "chosen_loo": min(table, key=lambda r: r["rank"])["model"],
+                    "chosen_loo_parsimonious": compare.select_parsimonious(table, n_params),
+                    "log_z": {n: float(log_z[n][k]) for n in names},
+                    "log_z_se": {n: float(se[n][k]) for n in names},
+                    "loo": {
+                        r["model"]: {
+                            key: r[key]
+                            for key in ("elpd_loo", "se", "elpd_diff", "dse", "pareto_k_max")
+                        }
+                        for r in table
+                    },
+                    "rhat_max": {n: float(np.max(f.rhat[k])) for n, f in fits.items()},
+                }
+            )
+    summary = {}
+    for rule in ("chosen_evidence", "chosen_loo", "chosen_loo_parsimonious"):
+        summary[rule] = {}
+        for gen in names:
+            r = [x for x in rows if x["generating"] == gen]
+            counts = {n: sum(x[rule] == n for x in r) for n in names}
+            summary[rule][gen] = {
+                "replicates": len(r),
+                "correct": counts[gen],
+                "fraction": counts[gen] / len(r),
+                "lower95": binomial_lower(counts[gen], len(r)),
+                "chosen": counts,
+            }
+        print(rule, {g: v["chosen"] for g, v in summary[rule].items()}, flush=True)
+    res = {
+        "config": CONFIG,
+        "parameter_set": parameter_set,
+        "noise_sigma": noise,
+        "summary": summary,
+        "rows": rows,
+    }
+    name = f"compare_objects_{parameter_set}_noise{noise:g}.json"
+    (out / name).write_text(json.dumps(res, indent=1))
     return res
 
 
@@ -198,16 +363,19 @@ def paper60(cache: str, out: Path, jobs: int = 2) -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("part", choices=["simulated", "paper60"])
+    ap.add_argument("part", choices=["simulated", "objects", "paper60"])
     ap.add_argument("--cache", default="/tmp/paper60")
     ap.add_argument("--out", default="studies/results")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--noise", type=float, default=CONFIG["noise_sigma"], help="relative noise")
+    ap.add_argument("--set", default="A", choices=sorted(CONFIG["object_truth"]))
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.part == "simulated":
         return simulated(args.cache, out, args.noise)
+    if args.part == "objects":
+        return objects(out, args.noise, args.set)
     return paper60(args.cache, out, args.jobs)
 
 

@@ -165,6 +165,49 @@ def test_ward_basis_against_brute_force():
     assert np.allclose(fast, slow, rtol=0.01)  # 12 x 16 nodes: < 1 % (measured 0.7 %)
 
 
+def test_object_groups_equal_separate_objects(scene_models):
+    # objects of consecutive facets in one batch (object_size) give exactly
+    # the prior, likelihood and pointwise terms of each object on its own
+    m = scene_models["lambert+phong"]
+    d = m.data.take(np.arange(6))
+    two = compare.comparison_model(
+        "lambert+phong", "x", d.y, d.valid, _bases(d), level="object", object_size=3
+    )
+    assert two.n_problems == 2
+    rng = np.random.default_rng(12)
+    th = two.initial(8, rng)  # (2, 8, 4)
+    for k in range(2):
+        dk = d.take(np.arange(3 * k, 3 * k + 3))
+        one = compare.comparison_model(
+            "lambert+phong", "x", dk.y, dk.valid, _bases(dk), level="object"
+        )
+        assert np.allclose(two.log_prior(th)[k], one.log_prior(th[k : k + 1])[0])
+        assert np.allclose(two.log_likelihood(th)[k], one.log_likelihood(th[k : k + 1])[0])
+        pw = two.log_likelihood(th, pointwise=True)
+        assert pw.shape == (2, 8, 3)
+        assert np.allclose(pw[k], one.log_likelihood(th[k : k + 1], pointwise=True)[0])
+    with pytest.raises(ValueError, match="object_size"):
+        compare.comparison_model("lambert", "x", d.y, d.valid, _bases(d), object_size=4)
+
+
+def _bases(d):
+    return render.FacetBases(d.diffuse, d.glossy, np.exp(d.log_n_grid))
+
+
+def test_fit_model_runs_to_50_tau_or_flags(scene_models):
+    # a 40-step run cannot hold 50 autocorrelation times (tau >= 1): flagged;
+    # allowed to go on, the run stops once every problem has 50 tau and R-hat
+    # < 1.01, and says so
+    m = scene_models["lambert"]
+    m = replace(m, data=m.data.take([0, 1]))
+    short = compare.fit_model(m, seed=13, burn=200, steps=40)
+    assert short.n_steps == 40 and not np.any(short.converged())
+    long = compare.fit_model(m, seed=13, burn=200, steps=200, max_steps=4000)
+    assert np.all(long.converged())
+    assert long.n_steps >= 50 * np.max(long.tau) and long.n_steps <= 4000
+    assert long.n_steps % 200 == 0  # whole chunks
+
+
 def test_fit_and_loo_prefers_lambert_on_lambert_data(scene_models):
     f = len(scene_models["lambert"].data.y)
     th = np.zeros((f, 4))
@@ -245,14 +288,109 @@ def test_evidence_agrees_with_dynesty(scene_models):
         assert abs(ev.log_z[i] - z) < 3 * np.hypot(ev.se[i], zerr), (ev.log_z[i], z)
 
 
+def _scene_objects(per_view, size, rng, views=("W", "SW", "S", "SE", "E")):
+    """Random objects of ``size`` facets of the paper scene (facets seen at cos
+    view > 0.2 and sunlit at some hour), ``per_view`` per view, stacked."""
+    diffuse, phong, ward, up = [], [], [], None
+    for view in views:
+        seq = paper_sequence(view=view, sky_model="gensky-clear")
+        g = seq.geometry
+        cand = np.nonzero((g.cos_view > 0.2) & ((g.normal @ seq.sky.sun_direction.T).max(1) > 0))[0]
+        geom = render.ViewGeometry(g.normal[cand], g.view_direction[cand])
+        ph = render.facet_bases(geom, seq.sky)
+        wd = render.ward_facet_bases(geom, seq.sky, diffuse=ph.diffuse)
+        up = seq.sky.sun_direction[:, 2] > 0
+        for _ in range(per_view):
+            pick = np.sort(rng.choice(len(cand), size, replace=False))
+            diffuse.append(ph.diffuse[pick])
+            phong.append(ph.glossy[pick])
+            ward.append(wd.glossy[pick])
+    d = np.concatenate(diffuse)
+    bases = {
+        "phong": render.FacetBases(d, np.concatenate(phong), ph.exponents),
+        "ward": render.FacetBases(d, np.concatenate(ward), wd.exponents),
+    }
+    return bases, np.broadcast_to(up, d.shape)
+
+
 @pytest.mark.slow
-def test_evidence_prefers_generating_model(scene_models):
-    # relative noise 0.05; gamma 0 / 1 / 0.5 / 0.5, n 200, alpha 0.1; the
-    # replicates: facets whose curve shows a highlight x 3 noise draws.
-    # Lambert and Phong alone are told from the rest in >= 90 % of the
-    # replicates; the two lobes beside Lambert (Phong n 200 against Ward)
-    # differ little at this noise (studies/compare_paper60.py: 72 % and 78 %
-    # correct), so for them the test asks only that Lambert plus a lobe wins
+def test_object_evidence_prefers_generating_model():
+    # Issue 6's goal at the object level (one material for all of an
+    # object's facets): 10 objects per generating model (2 per view of the
+    # paper scene, 10 random seen and sunlit facets each), relative noise
+    # 0.05 (the study's "moderate"), truths gamma 0 / 1 / 0.5 / 0.5, Phong n
+    # 200, Ward alpha 0.1 (lobes of matched width, n = 2 / alpha^2 - 2: they
+    # differ in shape only). The full study (30 objects of 15 facets per
+    # model, studies/results/compare_objects_{A,B}_noise0.05.json) finds
+    # 30 of 30 right for every model (95 % lower bound 0.905); Phong against
+    # Ward is decided by hundreds of nats, the nested models by their Occam
+    # factors, 5-7 nats (median; 3-7 at 10 facets). The evidence must
+    # then be good to ~1 nat: 24 rungs (with 16 the tempering swaps fail
+    # and ln Z scatters by +-10 nats, measured), 200 steps; 10 objects per
+    # model keep the test near 2 min. ">= 90 %" of 10 allows one miss: a
+    # method right 98 % of the time misses >= 2 of 10 with probability 1.6 %.
+    # The per-facet comparison (one facet's curve) falls short of 90 % for
+    # the two lobes beside Lambert (72 % and 78 %,
+    # studies/results/compare_simulated_noise0.05.json).
+    rng = np.random.default_rng(40)
+    size, per_view = 10, 2
+    truths = {
+        "lambert": (0.0, 0.0),
+        "phong": (1.0, np.log(200.0)),
+        "lambert+phong": (0.5, np.log(200.0)),
+        "lambert+ward": (0.5, np.log(0.1)),
+    }
+    ys, bases = [], {}
+    for gen, (g, ln) in truths.items():
+        b, valid = _scene_objects(per_view, size, rng)
+        m = compare.comparison_model(
+            gen, "x", b["phong"].diffuse, valid, b["ward" if gen == "lambert+ward" else "phong"]
+        )
+        th = np.zeros((len(valid), 1, 4))
+        th[..., 0], th[..., 1], th[..., 2], th[..., 3] = g, ln, np.log(0.5), np.log(0.05)
+        y = lk.simulate(th, m.data, rng)[:, 0]
+        ys.append(np.maximum(y, 1e-6 * y.max(1, keepdims=True)))
+        for k in b:
+            bases.setdefault(k, []).append(b[k])
+    bases = {
+        k: render.FacetBases(
+            np.concatenate([x.diffuse for x in v]),
+            np.concatenate([x.glossy for x in v]),
+            v[0].exponents,
+        )
+        for k, v in bases.items()
+    }
+    y = np.concatenate(ys)  # 4 generating models x 10 objects x 10 facets
+    valid = np.broadcast_to(valid[0], y.shape)
+    z = []
+    for r in compare.REFLECTANCE_MODELS:  # all 40 objects in one batch per candidate
+        m = compare.comparison_model(
+            r,
+            "x",
+            y,
+            valid,
+            bases["ward" if r == "lambert+ward" else "phong"],
+            level="object",
+            object_size=size,
+        )
+        ev = compare.model_evidence(
+            m, seed=41, burn=100, steps=200, n_walkers=8, betas=compare.power_ladder(24)
+        )
+        z.append(ev.log_z)
+    chosen = np.array(compare.REFLECTANCE_MODELS)[np.argmax(z, axis=0)].reshape(4, -1)
+    for gen, picks in zip(truths, chosen, strict=True):
+        assert np.mean(picks == gen) >= 0.9, (gen, np.unique(picks, return_counts=True))
+
+
+@pytest.mark.slow
+def test_facet_evidence_tells_lambert_and_phong(scene_models):
+    # the per-facet comparison (one facet's curve, its own parameters) on
+    # facets whose curve shows a highlight x 3 noise draws, relative noise
+    # 0.05: Lambert and Phong alone are told from the rest in >= 90 % of the
+    # replicates (study: 97 % each); the two lobes beside Lambert (Phong n
+    # 200 against Ward alpha 0.1) are not, per facet (study: 72 % and 78 %,
+    # below the issue's 90 %; the object level above meets it), so for them
+    # this test asks only that Lambert plus a lobe wins
     truths = {
         "lambert": (0.0, 0.0),
         "phong": (1.0, np.log(200.0)),
