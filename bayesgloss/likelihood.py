@@ -172,7 +172,7 @@ class CurveData:
         """max_t D_ft over valid frames, (B,)."""
         return np.max(np.where(self.valid, self.diffuse, 0.0), axis=1)
 
-    @property
+    @functools.cached_property
     def any_censored(self) -> bool:
         return bool(self.censored.any())
 
@@ -435,22 +435,30 @@ def _log_gamma_interval(k, x_lo, x_hi, cuts=None):
     ----------
     k : array_like (B, 1)
     x_lo, x_hi : ndarray (B, K)
+    cuts : tuple of ndarray (B, 1), optional
+        The tail cuts above for this k, when precomputed.
     """
     k = np.asarray(k, dtype=float)  # cuts on k's own shape, before broadcasting
-    lo_cut = np.minimum(np.exp((np.log(_TAIL_DROP / 2) + special.gammaln(k + 1.0)) / k), 0.5 * k)
-    hi_cut = np.where(k > 500, np.inf, k + 12.0 * np.sqrt(k) + 45.0)
+    if cuts is None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lo_cut = np.minimum(
+                np.exp((np.log(_TAIL_DROP / 2) + special.gammaln(k + 1.0)) / k), 0.5 * k
+            )
+        hi_cut = np.where(k > 500, np.inf, k + 12.0 * np.sqrt(k) + 45.0)
+    else:
+        lo_cut, hi_cut = cuts
     cut_lo = x_lo > lo_cut  # the interval cuts the lower tail off
     cut_hi = x_hi < hi_cut  # ... the upper tail
     out = np.zeros(x_lo.shape)
     kb = np.broadcast_to(k, x_lo.shape)
     one = cut_lo & ~cut_hi
-    if np.any(one):
+    if one.any():
         out[one] = _log_upper_gamma(kb[one], x_lo[one])  # log Q(k, x_lo)
     one = cut_hi & ~cut_lo
-    if np.any(one):
+    if one.any():
         out[one] = _log_lower_gamma(kb[one], x_hi[one])  # log P(k, x_hi)
     both = cut_lo & cut_hi
-    if np.any(both):
+    if both.any():
         kk, lo, hi = kb[both], x_lo[both], x_hi[both]
         upper = lo > kk  # difference the tails on the interval's side of the mode
         lq_lo, lq_hi = _log_upper_gamma(kk, lo), _log_upper_gamma(kk, hi)

@@ -39,9 +39,11 @@ chain is exactly what emcee would produce for it with the same moves.
 3. burn-in of at least 5 autocorrelation times;
 4. production until the run is at least ``min_tau_multiple`` integrated
    autocorrelation times (emcee's estimator: walker-averaged autocorrelation,
-   Sokal's window c = 5, pooled over the facet's ensembles) and ArviZ finds
-   gamma converged across several independent ensembles (R-hat < 1.01, bulk
-   and tail ESS >= 400), or to the step cap, flagged.
+   Sokal's window c = 5, pooled over the facet's ensembles) and gamma has
+   converged across several independent ensembles by ArviZ's criteria
+   (R-hat < 1.01, bulk and tail ESS >= 400; :func:`rank_diagnostics`
+   computes ArviZ's statistics for all facets due at once), or to the step
+   cap, flagged.
 """
 
 from __future__ import annotations
@@ -50,11 +52,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 
 from . import likelihood as lk
 
 __all__ = [
     "BatchedEnsemble",
+    "gamma_converged",
+    "rank_diagnostics",
     "integrated_time",
     "initial_ensemble",
     "sample_posterior",
@@ -88,6 +93,9 @@ class BatchedEnsemble:
             raise ValueError(f"unknown move(s) {sorted(bad)}; valid: stretch, de, de-jump")
         w = np.array([float(x) for _, x in moves])
         self.moves, self.weights = names, w / w.sum()
+        # Generator.choice(p=...) draws one uniform and searches this cdf
+        self._cdf = np.cumsum(self.weights)
+        self._cdf /= self._cdf[-1]
         self.rng = rng if rng is not None else np.random.default_rng()
         self.a = stretch_a
 
@@ -115,7 +123,8 @@ class BatchedEnsemble:
         drawn per problem and walker.
         """
         w = coords.shape[1]
-        move = self.moves[self.rng.choice(len(self.moves), p=self.weights)]
+        # = rng.choice(len(moves), p=weights), the same draw without its overhead
+        move = self.moves[int(self._cdf.searchsorted(self.rng.random(), side="right"))]
         order = self.rng.permutation(w)
         halves = (order[: w // 2], order[w // 2 :])
         accepted = np.zeros(log_p.shape, dtype=bool)
@@ -709,30 +718,49 @@ def _sample_stream(
         ch = ch.reshape(n_kept, a, e, n_walkers, p)
         acc = acc.reshape(a, e)
         finished = np.zeros(a, dtype=bool)
+        due = []  # places whose run is measured now
         for k, f in enumerate(facets):
             if age[k] <= burn_chunks:
                 continue
             kept[f].append(ch[:, k].astype(np.float32))
             acc_sum[k] += acc[k]
             n_steps = (age[k] - burn_chunks) * chunk
-            if n_steps < next_check[k] and n_steps < max_steps:
-                continue
-            run = np.concatenate(kept[f])  # (N / thin, E, W, P)
-            # one autocorrelation function averaged over the walkers of every
-            # ensemble (the same sampler on the same target): (P,) [steps]
-            t = thin * integrated_time(run.reshape(len(run), 1, e * n_walkers, p))[0]
+            if n_steps >= next_check[k] or n_steps >= max_steps:
+                kept[f] = [np.concatenate(kept[f])]  # (N / thin, E, W, P)
+                due.append(k)
+        # one autocorrelation function averaged over the walkers of every
+        # ensemble (the same sampler on the same target), per parameter;
+        # runs of the same length share one transform
+        taus = {}
+        for n_kept in {len(kept[facets[k]][0]) for k in due}:
+            group = [k for k in due if len(kept[facets[k]][0]) == n_kept]
+            runs = np.stack([kept[facets[k]][0] for k in group], axis=1)
+            t = thin * integrated_time(runs.reshape(n_kept, len(group), e * n_walkers, p))
+            taus.update(zip(group, t, strict=True))
+        checks = {}
+        for k in due:
+            run, t = kept[facets[k]][0], taus[k]
             t_max = np.nan_to_num(t, nan=np.inf).max()
             # burn-in of at least burn_taus tau: where the fixed burn was shorter,
             # the start of the production run is discarded too
             drop = burn_taus * t_max - burn_chunks * chunk
             drop = int(np.ceil(drop / thin)) if np.isfinite(drop) and drop > 0 else 0
             run = run[min(drop, len(run) // 2) :]
-            draws = _ensemble_draws(run, draws_per_ensemble)  # (E, S, P)
             enough = len(run) * thin >= t_max * min_tau_multiple
             need = t_max * min_tau_multiple + drop * thin
-            if (enough and _gamma_converged(draws[..., 0])) or n_steps >= max_steps:
+            checks[k] = (_ensemble_draws(run, draws_per_ensemble), enough, need)  # (E, S, P)
+        # R-hat and ESS of gamma for every run long enough, at once
+        ready = [k for k in due if checks[k][1]]
+        converged = {}
+        if ready:
+            gammas = np.stack([checks[k][0][..., 0] for k in ready])
+            converged = dict(zip(ready, gamma_converged(gammas), strict=True))
+        for k in due:
+            f, (draws, enough, need) = facets[k], checks[k]
+            n_steps = (age[k] - burn_chunks) * chunk
+            if converged.get(k, False) or n_steps >= max_steps:
                 out[f] = draws
-                tau_out[f], steps_out[f] = t, n_steps
+                tau_out[f], steps_out[f] = taus[k], n_steps
                 acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
                 del kept[f]
                 finished[k] = True
@@ -765,14 +793,132 @@ def _ensemble_draws(run, n_draws: int) -> np.ndarray:
     return run[idx].transpose(1, 2, 0, 3).reshape(e, w * per, p).astype(float)
 
 
-def _gamma_converged(gamma) -> bool:
-    """ArviZ's rank-normalised R-hat < 1.01 and bulk and tail ESS >= 400 (E, S)."""
-    import arviz as az
+def gamma_converged(draws, rhat_max: float = 1.01, ess_min: float = 400.0) -> np.ndarray:
+    """ArviZ's convergence criteria for many parameters at once: rank-normalised
+    R-hat < 1.01 and bulk and tail ESS >= 400 (Vehtari et al. 2021).
 
-    if not np.all(np.isfinite(gamma)) or np.ptp(gamma) == 0:
-        return False
-    return bool(
-        az.rhat(gamma) < 1.01
-        and az.ess(gamma, method="bulk") >= 400
-        and az.ess(gamma, method="tail") >= 400
+    Parameters
+    ----------
+    draws : array_like (F, C, S)
+        F parameters (here, one facet's gamma each), C chains of S draws.
+
+    Returns
+    -------
+    ndarray (F,) of bool
+        False where a draw is not finite or all draws are equal.
+    """
+    x = np.asarray(draws, dtype=float)
+    ok = np.isfinite(x).all(axis=(1, 2)) & (np.ptp(x, axis=(1, 2)) > 0)
+    if not ok.any():
+        return ok
+    rhat, ess_bulk, ess_tail = rank_diagnostics(x[ok])
+    ok[ok] = (rhat < rhat_max) & (ess_bulk >= ess_min) & (ess_tail >= ess_min)
+    return ok
+
+
+def rank_diagnostics(draws):
+    """ArviZ's rank-normalised R-hat and bulk and tail ESS, for many
+    parameters at once (Vehtari et al. 2021, "Rank-normalization, folding,
+    and localization", Bayesian Analysis 16, eqs. 3-4 and sec. 4.3).
+
+    The same arithmetic as ``arviz.rhat``, ``arviz.ess(method="bulk")`` and
+    ``arviz.ess(method="tail")`` (arviz 0.23) on each (chain, draw) slice,
+    vectorised over the leading axis (tests/test_sampling.py compares them
+    to 1e-9): chains split in halves; ranks over all draws (ties averaged)
+    mapped to normal scores with Blom's offset 3/8; R-hat the larger of the
+    bulk and the folded (|x - median|) split R-hat; ESS with Geyer's initial
+    positive then monotone sequence on the chain-averaged autocovariance;
+    tail ESS the smaller of those of the indicators x <= q_0.05 and
+    x <= q_0.95 (type-7 quantiles).
+
+    Parameters
+    ----------
+    draws : array_like (F, C, S)
+        F parameters, C chains of S draws (C >= 2, S >= 4, finite).
+
+    Returns
+    -------
+    rhat, ess_bulk, ess_tail : ndarray (F,)
+    """
+    x = np.asarray(draws, dtype=float)
+    half = x.shape[2] // 2
+    split = np.concatenate([x[:, :, :half], x[:, :, x.shape[2] - half :]], axis=1)
+    z = _normal_scores(split)
+    folded = np.abs(split - np.median(split.reshape(len(x), -1), axis=1)[:, None, None])
+    rhat = np.maximum(_split_rhat(z), _split_rhat(_normal_scores(folded)))
+    ess_bulk = _geyer_ess(z)
+    q = np.quantile(x.reshape(len(x), -1), [0.05, 0.95], axis=1)  # (2, F)
+    ess_tail = np.minimum(
+        _geyer_ess((split <= q[0][:, None, None]).astype(float)),
+        _geyer_ess((split <= q[1][:, None, None]).astype(float)),
     )
+    return rhat, ess_bulk, ess_tail
+
+
+def _normal_scores(x):
+    """Rank-normal scores over each (C, S) slice of x (F, C, S): ranks with
+    ties averaged, mapped by Blom's (r - 3/8) / (N + 1/4) to normal quantiles."""
+    f = len(x)
+    a = x.reshape(f, -1)
+    n = a.shape[1]
+    order = np.argsort(a, axis=1, kind="stable")
+    sa = np.take_along_axis(a, order, axis=1)
+    pos = np.arange(n)
+    starts = np.ones(a.shape, dtype=bool)
+    starts[:, 1:] = sa[:, 1:] != sa[:, :-1]  # first of a run of ties
+    ends = np.ones(a.shape, dtype=bool)
+    ends[:, :-1] = starts[:, 1:]  # last of a run of ties
+    first = np.maximum.accumulate(np.where(starts, pos, 0), axis=1)
+    last = np.minimum.accumulate(np.where(ends, pos, n)[:, ::-1], axis=1)[:, ::-1]
+    rank = np.empty(a.shape)
+    np.put_along_axis(rank, order, 0.5 * (first + last) + 1.0, axis=1)
+    return special.ndtri((rank - 0.375) / (n + 0.25)).reshape(x.shape)
+
+
+def _split_rhat(z):
+    """Gelman-Rubin R-hat of each (C, S) slice of z (F, C, S)."""
+    s = z.shape[2]
+    between = s * np.var(z.mean(axis=2), axis=1, ddof=1)
+    within = np.var(z, axis=2, ddof=1).mean(axis=1)
+    return np.sqrt((between / within + s - 1) / s)
+
+
+def _geyer_ess(x):
+    """Effective sample size of each (C, S) slice of x (F, C, S): Geyer's
+    initial positive sequence of autocorrelation pairs, made monotone."""
+    f, c, s = x.shape
+    const = (x.max(axis=(1, 2)) - x.min(axis=(1, 2))) < np.finfo(float).resolution
+    d = x - x.mean(axis=2, keepdims=True)
+    spec = np.fft.rfft(d, n=_fast_length(2 * s), axis=2)
+    acov = np.fft.irfft(spec.real**2 + spec.imag**2, n=_fast_length(2 * s), axis=2)[..., :s] / s
+    mean_var = acov[:, :, 0].mean(axis=1) * s / (s - 1.0)
+    var_plus = mean_var * (s - 1.0) / s + np.var(x.mean(axis=2), axis=1, ddof=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = 1.0 - (mean_var[:, None] - acov.mean(axis=1)) / var_plus[:, None]  # (F, S)
+    rho[:, 0] = 1.0
+    # pairs P_k = rho_2k + rho_2k+1; the positive sequence runs to the first
+    # k >= 1 with P_k <= 0 (K), or to the last pair computed (2k - 1 < S - 3)
+    k_lim = max(0, (s - 3) // 2)
+    n_pairs = k_lim + 1
+    pad = np.zeros((f, 2 * n_pairs + 1))
+    m = min(s, pad.shape[1])
+    pad[:, :m] = rho[:, :m]
+    pairs = pad[:, 0 : 2 * n_pairs : 2] + pad[:, 1 : 2 * n_pairs : 2]  # (F, K+1)
+    stop = np.concatenate([pairs[:, 1:] <= 0, np.ones((f, 1), dtype=bool)], axis=1)
+    first = np.minimum(np.argmax(stop, axis=1) + 1, k_lim)
+    big_k = np.where(pairs[:, 0] > 0, first, 0)  # (F,)
+    idx = np.arange(n_pairs)
+    used = idx[None, :] < big_k[:, None]
+    mono = np.minimum.accumulate(np.where(used, pairs, np.inf), axis=1)
+    total = np.where(used, mono, 0.0).sum(axis=1)
+    last_even = np.take_along_axis(pad, (2 * big_k)[:, None], axis=1)[:, 0]
+    last_pair = np.take_along_axis(pairs, big_k[:, None], axis=1)[:, 0]
+    last = np.where((last_pair >= 0) | (last_even > 0), last_even, 0.0)
+    last = np.where(big_k == 0, 1.0, last)
+    tau = -1.0 + 2.0 * total + last
+    n = c * s
+    tau = np.maximum(tau, 1.0 / np.log10(n))
+    ess = n / tau
+    bad = ~np.isfinite(var_plus) | np.isnan(rho[:, : 2 * n_pairs]).any(axis=1)
+    ess = np.where(bad, np.nan, ess)
+    return np.where(const, float(n), ess)
