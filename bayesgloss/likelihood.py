@@ -107,6 +107,7 @@ class _FastTables:
     log_floor_invalid: np.ndarray  # (B,) (T - T_valid) log f'
     n_valid: np.ndarray  # (B,)
     ones: np.ndarray  # (T,)
+    offsets: np.ndarray  # (B, 1) first table row of each facet, b N
 
     @classmethod
     def of(cls, data: CurveData) -> _FastTables:
@@ -126,6 +127,7 @@ class _FastTables:
             (t - v.sum(axis=1)) * np.log(floor.astype(f32)).astype(float),
             v.sum(axis=1),
             np.ones(t, dtype=f32),
+            (np.arange(len(v)) * data.glossy.shape[1])[:, None],
         )
 
 
@@ -339,9 +341,9 @@ def _fast_relative_terms(th, data: CurveData):
     grid = data.log_n_grid
     n = len(grid)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        pos = np.clip((th[..., 1] - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
+        pos = np.minimum(np.maximum(th[..., 1] - grid[0], 0.0) / (grid[1] - grid[0]), n - 1.000001)
         j = pos.astype(np.intp)
-        rows = (j + (np.arange(b) * n)[:, None]).ravel()
+        rows = (j + tab.offsets).ravel()
         m = np.take(tab.dg, rows, axis=0)
         m *= (pos - j).astype(f32).reshape(-1, 1)
         m += np.take(tab.g0, rows, axis=0)  # G(n) - D, linear in log n
@@ -450,7 +452,9 @@ def _log_gamma_interval(k, x_lo, x_hi, cuts=None):
     cut_lo = x_lo > lo_cut  # the interval cuts the lower tail off
     cut_hi = x_hi < hi_cut  # ... the upper tail
     out = np.zeros(x_lo.shape)
-    kb = np.broadcast_to(k, x_lo.shape)
+    if not (cut_lo.any() or cut_hi.any()):
+        return out
+    kb = out + k  # k on the shape of x
     one = cut_lo & ~cut_hi
     if one.any():
         out[one] = _log_upper_gamma(kb[one], x_lo[one])  # log Q(k, x_lo)

@@ -66,9 +66,14 @@ __all__ = [
     "PosteriorSamples",
     "RidgeCoordinates",
     "DEFAULT_MOVES",
+    "FACET_MOVES",
+    "ExponentJump",
 ]
 
 DEFAULT_MOVES = (("stretch", 0.2), ("de", 0.7), ("de-jump", 0.1))
+#: The facet sampler's mix: the default plus independence jumps in log n
+#: between the modes of its profile posterior (:class:`ExponentJump`).
+FACET_MOVES = (("stretch", 0.2), ("de", 0.6), ("de-jump", 0.1), ("n-jump", 0.1))
 
 
 class BatchedEnsemble:
@@ -79,18 +84,22 @@ class BatchedEnsemble:
     log_prob : callable
         theta (B, K, P) -> log density (B, K); must accept any K.
     moves : sequence of (name, weight)
-        From ``"stretch"``, ``"de"``, ``"de-jump"``.
+        From ``"stretch"``, ``"de"``, ``"de-jump"`` and ``"n-jump"`` (needs
+        ``jump``).
     rng : numpy.random.Generator
     stretch_a : float
         Scale of the stretch move (emcee's default 2).
+    jump : ExponentJump, optional
+        The independence proposal of the ``"n-jump"`` move, one per problem.
     """
 
-    def __init__(self, log_prob, moves=DEFAULT_MOVES, rng=None, stretch_a: float = 2.0):
+    def __init__(self, log_prob, moves=DEFAULT_MOVES, rng=None, stretch_a: float = 2.0, jump=None):
         self.log_prob = log_prob
+        self.jump = jump
         names = [m for m, _ in moves]
-        bad = set(names) - {"stretch", "de", "de-jump"}
+        bad = set(names) - {"stretch", "de", "de-jump", "n-jump"}
         if bad:
-            raise ValueError(f"unknown move(s) {sorted(bad)}; valid: stretch, de, de-jump")
+            raise ValueError(f"unknown move(s) {sorted(bad)}; valid: stretch, de, de-jump, n-jump")
         w = np.array([float(x) for _, x in moves])
         self.moves, self.weights = names, w / w.sum()
         # Generator.choice(p=...) draws one uniform and searches this cdf
@@ -100,20 +109,29 @@ class BatchedEnsemble:
         self.a = stretch_a
 
     def _propose(self, move, s, c):
-        """Proposals for walkers s (B, H, P) from the complementary half c (B, C, P)."""
+        """Proposals for walkers s (B, H, P) from the complementary half c (B, C, P).
+
+        Walker indices are drawn as floor(u C) from uniforms (exactly uniform
+        integers up to 2^-53), the cheapest draw for many small problems.
+        """
         b, h, p = s.shape
         nc = c.shape[1]
         rng = self.rng
-        rows = np.arange(b)[:, None]
+        if move == "n-jump":
+            return self.jump.propose(s, rng)
+        flat = c.reshape(b * nc, p)
+        base = (np.arange(b) * nc)[:, None]  # first row of each problem in flat
+        u = rng.random((2, b, h))
         if move == "stretch":
-            z = ((self.a - 1.0) * rng.random((b, h)) + 1.0) ** 2 / self.a
-            cj = c[rows, rng.integers(0, nc, (b, h))]
+            z = ((self.a - 1.0) * u[0] + 1.0) ** 2 / self.a
+            cj = np.take(flat, base + (u[1] * nc).astype(np.intp), axis=0)
             return cj - (cj - s) * z[..., None], (p - 1.0) * np.log(z)
         g0 = 1.0 if move == "de-jump" else 2.38 / np.sqrt(2.0 * p)
-        i = rng.integers(0, nc, (b, h))
-        j = (i + rng.integers(1, nc, (b, h))) % nc  # distinct from i
+        i = (u[0] * nc).astype(np.intp)
+        j = (i + 1 + (u[1] * (nc - 1)).astype(np.intp)) % nc  # distinct from i
         gamma = g0 * (1.0 + 1e-5 * rng.standard_normal((b, h, 1)))
-        return s + gamma * (c[rows, i] - c[rows, j]), np.zeros((b, h))
+        diff = np.take(flat, base + i, axis=0) - np.take(flat, base + j, axis=0)
+        return s + gamma * diff, np.zeros((b, h))
 
     def step(self, coords, log_p):
         """One step (both halves) in place; returns the acceptance mask (B, W).
@@ -418,36 +436,53 @@ class RidgeCoordinates:
             object.__setattr__(self, "_nodes_cache", nodes)
         return nodes
 
+    @property
+    def _offsets(self) -> np.ndarray:
+        """First node row of each facet in :attr:`_nodes`, (B, 1)."""
+        off = self.__dict__.get("_offsets_cache")
+        if off is None:
+            off = (np.arange(len(self.active)) * len(self.log_n_grid))[:, None]
+            object.__setattr__(self, "_offsets_cache", off)
+        return off
+
     def _at(self, log_n):
         """(c1, c2, L11, L21, L22) interpolated at log n (B, K): (B, K, 5)."""
         grid = self.log_n_grid
         n = len(grid)
         b, k = log_n.shape
-        pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
+        pos = np.minimum(np.maximum(log_n - grid[0], 0.0) / (grid[1] - grid[0]), n - 1.000001)
         j = pos.astype(np.intp)
-        rows = np.take(self._nodes, (j + (np.arange(b) * n)[:, None]).ravel(), 0)
-        rows = rows.reshape(b, k, 10)
+        rows = np.take(self._nodes, (j + self._offsets).ravel(), 0).reshape(b, k, 10)
         return rows[..., :5] + (pos - j)[..., None] * rows[..., 5:]
+
+    @property
+    def _any_active(self) -> bool:
+        flags = self.__dict__.get("_flags")
+        if flags is None:
+            flags = (bool(self.active.any()), bool(self.active.all()))
+            object.__setattr__(self, "_flags", flags)
+        return flags
 
     def to_theta(self, x):
         """theta (B, K, P) and log |d theta / d x| (B, K) at x (B, K, P);
-        -inf Jacobian where x maps to no scale s > 0."""
+        NaN where x maps to no scale s > 0 (the caller's density is then -inf)."""
         x = np.asarray(x, dtype=float)
-        if not self.active.any():
+        any_active, all_active = self._any_active
+        if not any_active:
             return x, np.zeros(x.shape[:2])
         v = self._at(x[..., 0])
         a = v[..., 0] + v[..., 2] * x[..., 1]
         b = v[..., 1] + v[..., 3] * x[..., 1] + v[..., 4] * x[..., 2]
-        s = a + b
-        ok = s > 0
-        s = np.where(ok, s, 1.0)
-        th = np.empty_like(x)
-        th[..., 3:] = x[..., 3:]
-        th[..., 0] = np.where(ok, b / s, -1.0)
-        th[..., 1] = x[..., 0]
-        th[..., 2] = np.log(s)
-        log_jac = np.where(ok, np.log(v[..., 2] * v[..., 4]) - 2.0 * th[..., 2], -np.inf)
-        if self.active.all():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = a + b
+            log_s = np.log(s)  # NaN (or -inf) where s <= 0
+            th = np.empty(x.shape)
+            th[..., 0] = b / s
+            th[..., 1] = x[..., 0]
+            th[..., 2] = log_s
+            th[..., 3:] = x[..., 3:]
+            log_jac = np.log(v[..., 2] * v[..., 4]) - 2.0 * log_s
+        if all_active:
             return th, log_jac
         act = self.active[:, None, None]
         return np.where(act, th, x), np.where(act[..., 0], log_jac, 0.0)
@@ -473,10 +508,140 @@ class RidgeCoordinates:
         def in_x(x):
             th, log_jac = self.to_theta(x)
             with np.errstate(invalid="ignore"):
-                out = log_prob(th, data) + log_jac
+                out = log_prob(th, data) + log_jac  # NaN where s <= 0
             return np.where(np.isnan(out), -np.inf, out)
 
         return in_x
+
+
+@dataclass(frozen=True)
+class ExponentJump:
+    """Independence proposals in log n, for posteriors with several modes in n.
+
+    With a few frames a day, the glossy peak of a sharp lobe can fall
+    between frames, and curves of quite different exponents fit almost
+    equally well: the posterior of log n then has separated modes, which
+    the ensemble moves (built from differences of walkers) rarely cross.
+    This move proposes each walker's log n afresh, keeping its other
+    sampling coordinates, from a fixed density q built from the facet's
+    profile posterior of log n: on M cells of equal width h spanning the
+    prior range, q_m = (1 - eps) exp(l_m) / sum exp(l) + eps / M, with l_m
+    the log posterior density at the cell centre with gamma and s at their
+    weighted least-squares values there (and sigma at the fit's rms, where
+    it is sampled). The floor eps keeps every cell reachable. Metropolis-
+    Hastings with the independence factor q(x_n) / q(y_n) leaves the
+    posterior invariant (Tierney 1994, "Markov chains for exploring posterior
+    distributions", Ann. Stat. 22, sec. 2.3.3). In ridge coordinates the
+    other coordinates are standardised offsets from the ridge at n, so the
+    walker lands on the ridge of the new exponent.
+
+    Attributes
+    ----------
+    lo, width : float
+        Left edge and width of the cells [log n].
+    log_q : ndarray (B, M)
+        log q per unit log n in each cell.
+    cdf : ndarray (B, M)
+        Cumulative cell probabilities (last exactly 1).
+    column : ndarray (B,) of int
+        The sampling coordinate that holds log n (0 in ridge coordinates,
+        1 in plain ones).
+    """
+
+    lo: float
+    width: float
+    log_q: np.ndarray
+    cdf: np.ndarray
+    column: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        data: lk.CurveData,
+        marginal: bool,
+        cells: int = 400,
+        floor: float = 0.1,
+        block: int = 64,
+    ) -> ExponentJump:
+        """The proposal of every facet of ``data`` (plain coordinates; see
+        :meth:`take` for ridge ones)."""
+        lo, hi = data.priors.log_n
+        width = (hi - lo) / cells
+        centres = lo + width * (np.arange(cells) + 0.5)
+        log_post = np.concatenate(
+            [
+                _profile_log_posterior(
+                    data.take(np.arange(i, min(i + block, len(data.y)))), centres, marginal
+                )
+                for i in range(0, len(data.y), block)
+            ]
+        )
+        with np.errstate(invalid="ignore"):
+            top = np.max(log_post, axis=1, keepdims=True)
+            w = np.exp(log_post - top)
+        w = np.where(np.isfinite(w), w, 0.0)
+        tot = w.sum(axis=1, keepdims=True)
+        w = np.where(tot > 0, w / np.where(tot > 0, tot, 1.0), 1.0 / cells)
+        q = (1.0 - floor) * w + floor / cells
+        cdf = np.cumsum(q, axis=1)
+        cdf /= cdf[:, -1:]
+        return cls(float(lo), float(width), np.log(q / width), cdf, np.ones(len(q), dtype=int))
+
+    def take(self, index, ridge=None) -> ExponentJump:
+        """Rows ``index``; ``ridge`` (bool per row) marks ridge coordinates."""
+        idx = np.asarray(index)
+        col = self.column[idx] if ridge is None else np.where(ridge, 0, 1)
+        return ExponentJump(self.lo, self.width, self.log_q[idx], self.cdf[idx], col)
+
+    def propose(self, s, rng):
+        """Proposals (B, H, P) for walkers s and the log factor log q(x) - log q(y)."""
+        b, h, p = s.shape
+        m = self.cdf.shape[1]
+        u = rng.random((2, b, h))
+        # every row's cdf lifted by its row number: one sorted array to search
+        lifted = (self.cdf + np.arange(b)[:, None]).ravel()
+        row = np.arange(b)[:, None]
+        cell = np.searchsorted(lifted, u[0] + row, side="right") - row * m
+        cell = np.minimum(cell, m - 1)
+        new = self.lo + (cell + u[1]) * self.width
+        cols = self.column[:, None, None] == np.arange(p)  # (B, 1, P)
+        old = np.take_along_axis(s, self.column[:, None, None], axis=2)[..., 0]
+        old_cell = np.clip(((old - self.lo) / self.width).astype(np.intp), 0, m - 1)
+        flat = self.log_q.ravel()
+        factor = flat[old_cell + row * m] - flat[cell + row * m]
+        return np.where(cols, new[..., None], s), factor
+
+
+def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool) -> np.ndarray:
+    """Log posterior density at each log n (B, M), gamma and s (and sigma)
+    at their weighted least-squares values there (see :class:`ExponentJump`)."""
+    grid = data.log_n_grid
+    n = len(grid)
+    pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
+    j = pos.astype(np.intp)
+    frac = (pos - j)[None, :, None]
+    g = data.glossy[:, j] + frac * (data.glossy[:, j + 1] - data.glossy[:, j])  # (B, M, T)
+    _, _, _, w = _node_fits(data, weights=True)
+    w = w[:, np.rint(pos).astype(np.intp)]
+    y, d = data.y[:, None, :], data.diffuse[:, None, :]
+    y = np.maximum(y, 0.0) if data.camera == "power" else y
+    a, b = _nonnegative_pair(y, d, g, w)
+    s = a + b
+    ok = s > 0
+    th = np.empty(a.shape + (3 if marginal else data.n_params,))
+    th[..., 0] = np.where(ok, b / np.where(ok, s, 1.0), 0.5)
+    th[..., 1] = log_n
+    th[..., 2] = np.where(ok, np.log(np.where(ok, s, 1.0)), data.log_s_center[:, None])
+    if marginal:
+        return lk.log_probability_sigma_marginal(th, data)
+    n_valid = np.maximum(data.valid.sum(1), 1)[:, None]
+    mu = a[..., None] * d + b[..., None] * g
+    rms = np.sqrt(np.sum(w * (y - mu) ** 2, -1) / n_valid)
+    lo_s, hi_s = data.priors.log_sigma
+    th[..., 3] = np.clip(np.log(np.maximum(rms, 1e-300)), lo_s + 1e-6, hi_s - 1e-6)
+    if data.n_params == 5:
+        th[..., 4] = 0.0  # g = 1
+    return lk.log_probability(th, data)
 
 
 @dataclass
@@ -517,7 +682,7 @@ def sample_posterior(
     min_tau_multiple: float = 50.0,
     max_steps: int = 8000,
     draws_per_ensemble: int = 1000,
-    moves=DEFAULT_MOVES,
+    moves=FACET_MOVES,
     seed: int | None = 0,
     jobs: int = 1,
     stream_size: int = 600,
@@ -562,6 +727,8 @@ def sample_posterior(
         Draws kept per ensemble (rounded down to a multiple of the walkers):
         every walker's trajectory thinned evenly.
     moves : sequence of (name, weight)
+        :class:`BatchedEnsemble`'s moves; ``"n-jump"`` proposes from each
+        facet's :class:`ExponentJump`.
     seed : int or None
     jobs : int
         Worker processes.
@@ -659,6 +826,7 @@ def _sample_stream(
     n_f, e, p = len(data.y), n_ensembles, (3 if marginal else data.n_params)
     log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
     coords_of = RidgeCoordinates.of(data, max_rms=ridge if ridge else -1.0)
+    jump = ExponentJump.of(data, marginal) if "n-jump" in [m for m, _ in moves] else None
     burn_chunks = -(-burn // chunk)
     draws_per_ensemble = n_walkers * max(1, draws_per_ensemble // n_walkers)
     out = np.empty((n_f, e, draws_per_ensemble, p))
@@ -705,6 +873,8 @@ def _sample_stream(
         rows = np.repeat(facets, e)
         batch_coords = coords_of.take(rows)
         sampler.log_prob = batch_coords.log_prob(log_prob, data.take(rows))
+        if jump is not None:
+            sampler.jump = jump.take(rows, batch_coords.active)
         ch, lp, acc = sampler.run(coords, chunk, logp)
         coords, logp = ch[-1].copy(), lp[-1].copy()
         age += 1

@@ -13,7 +13,8 @@ Facet sets (``--facets-from``):
 
 Both samplers run the protocol of :func:`bayesgloss.sampling.sample_posterior`
 with its defaults: sigma integrated out, ridge coordinates for low-noise
-facets, 4 independent ensembles of 2 P walkers, the same move mix, burn-in of
+facets, 4 independent ensembles of 2 P walkers, the same move mix (stretch,
+DE, DE with gamma 1, and the jumps in log n as an emcee ``MHMove``), burn-in of
 at least 5 integrated autocorrelation times, production until the pooled
 autocorrelation time says 50 tau and ArviZ finds gamma converged (R-hat <
 1.01, bulk and tail ESS >= 400), at most 8000 steps. Stock emcee runs each
@@ -127,10 +128,17 @@ def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
     coords = sampling.RidgeCoordinates.of(data)
     log_prob = coords.log_prob(density, data)
     rng = np.random.default_rng(seed)
-    moves = [
+    jump = sampling.ExponentJump.of(data, marginal).take([0], coords.active)
+
+    def exponent_jump(x, random):  # the n-jump move as an emcee Metropolis-Hastings move
+        y, factor = jump.propose(x[None], random)
+        return y[0], factor[0]
+
+    moves = [  # sampling.FACET_MOVES
         (emcee.moves.StretchMove(), 0.2),
-        (emcee.moves.DEMove(), 0.7),
+        (emcee.moves.DEMove(), 0.6),
         (emcee.moves.DEMove(gamma0=1.0), 0.1),
+        (emcee.moves.MHMove(exponent_jump), 0.1),
     ]
     samplers = []
     for k in range(e):

@@ -217,3 +217,42 @@ def test_rank_diagnostics_equal_arviz():
     assert sampling.gamma_converged(_ar1(0.5, (3, 4, 996), rng)).all()
     stuck = _ar1(0.5, (1, 4, 996), rng) + 2.0 * np.arange(4)[None, :, None]
     assert not sampling.gamma_converged(stuck)[0]
+
+
+def test_exponent_jump_gets_mode_weights_of_a_bimodal_target():
+    """Two narrow modes in coordinate 0 (weights 0.3 and 0.7, 120 sd apart):
+    stretch and DE moves started in one mode stay there; the n-jump move,
+    with a deliberately wrong proposal (0.8 and 0.2 on the modes), still
+    finds 0.3, which it does only with its independence factor (without it
+    the chain would settle at 0.3 x 0.8 / (0.3 x 0.8 + 0.7 x 0.2) = 0.63).
+    Tolerance 0.03: ~5 standard errors of the pooled fraction over 8
+    problems x 6 walkers x 2500 kept steps (jumps are accepted often, so
+    draws a few steps apart are nearly independent)."""
+    sd, w_left = 0.05, 0.3
+
+    def log_prob(x):
+        x0 = x[..., 0]
+        left = np.log(w_left) - 0.5 * ((x0 + 3) / sd) ** 2
+        right = np.log(1 - w_left) - 0.5 * ((x0 - 3) / sd) ** 2
+        return np.logaddexp(left, right) - 0.5 * np.sum(x[..., 1:] ** 2, axis=-1)
+
+    b, w, p, cells = 8, 6, 3, 400
+    lo, width = -6.0, 12.0 / cells
+    centres = lo + width * (np.arange(cells) + 0.5)
+    q = np.where(centres < 0, 0.8, 0.2) * np.exp(-0.5 * ((np.abs(centres) - 3) / (2 * sd)) ** 2)
+    q = q / q.sum() + 1e-4
+    q /= q.sum()
+    cdf = np.cumsum(q)
+    cdf /= cdf[-1]
+    jump = sampling.ExponentJump(
+        lo, width, np.tile(np.log(q / width), (b, 1)), np.tile(cdf, (b, 1)), np.zeros(b, int)
+    )
+    rng = np.random.default_rng(5)
+    start = rng.normal(0, 0.01, (b, w, p)) + [3.0, 0.0, 0.0]
+    fractions = {}
+    for moves in (sampling.DEFAULT_MOVES, sampling.FACET_MOVES):
+        sampler = sampling.BatchedEnsemble(log_prob, moves, np.random.default_rng(6), jump=jump)
+        chain, _, _ = sampler.run(start, 3000)
+        fractions[moves] = np.mean(chain[500:, ..., 0] < 0)
+    assert fractions[sampling.DEFAULT_MOVES] < 0.01
+    assert abs(fractions[sampling.FACET_MOVES] - w_left) < 0.03
