@@ -325,9 +325,10 @@ def predict(theta, data: CurveData) -> np.ndarray:
     return mu
 
 
-def _fast_relative_terms(th, data: CurveData):
+def _fast_relative_terms(th, data: CurveData, with_log: bool = True):
     """(Q, sum_t log(m'_t + f'_t)) over valid frames for the default model
-    (linear camera, relative noise), in float32 with the scale factored out.
+    (linear camera, relative noise), in float32 with the scale factored out
+    (the second term None without ``with_log``).
 
     r_t = (y_t / s - m'_t) / (m'_t + f'_t), Q = sum_t r_t^2, with m' =
     D + gamma (G(n) - D) the prediction at unit scale and f' = FLOOR_FRACTION
@@ -356,8 +357,10 @@ def _fast_relative_terms(th, data: CurveData):
         r3 /= m3
         r = r3.reshape(-1, t)
         r *= r
-        np.log(m, out=m)
         q = (r @ tab.ones).reshape(b, k).astype(np.float64)
+        if not with_log:
+            return q, None
+        np.log(m, out=m)
         log_m = (m @ tab.ones).reshape(b, k).astype(np.float64)
     return q, log_m - tab.log_floor_invalid[:, None]
 
@@ -374,11 +377,14 @@ def _fast_relative(th, data: CurveData) -> np.ndarray:
         )
 
 
-def _residual_parts(th, data: CurveData):
+def _residual_parts(th, data: CurveData, with_log: bool = True):
     """(Q, sum_t log v_t) over valid frames for the Gaussian noise models,
-    where the noise sd is sigma v_t (v_t = 1 for ``"gaussian"``)."""
+    where the noise sd is sigma v_t (v_t = 1 for ``"gaussian"``); the second
+    None without ``with_log``."""
     if data.noise == "relative":
-        q, log_m = _fast_relative_terms(th, data)
+        q, log_m = _fast_relative_terms(th, data, with_log)
+        if not with_log:
+            return q, None
         return q, log_m + data.fast_tables.n_valid[:, None] * th[..., 2]
     m = predict(th[..., :3], data)
     q = np.sum(np.where(data.valid[:, None, :], (data.y[:, None, :] - m) ** 2, 0.0), axis=-1)
@@ -561,7 +567,7 @@ def draw_log_sigma(theta, data: CurveData, rng: np.random.Generator) -> np.ndarr
     la, lb = data.priors.log_sigma
     k = 0.5 * data.valid.sum(axis=1)[:, None].astype(float)
     k = np.broadcast_to(k, th.shape[:2])
-    q, _ = _residual_parts(th, data)
+    q, _ = _residual_parts(th, data, with_log=False)
     q = np.maximum(q, 1e-300)
     x_lo, x_hi = q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la))
     x = rng.standard_gamma(k)

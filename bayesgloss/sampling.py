@@ -329,22 +329,30 @@ def initial_ensemble(data: lk.CurveData, n_walkers: int, rng) -> np.ndarray:
     p = data.n_params
     th = np.empty((b_count, n_walkers, p))
     dx = data.log_n_grid[1] - data.log_n_grid[0]
-    th[..., 0] = np.clip(
-        take(gamma, node, 1) + 0.02 * rng.standard_normal(node.shape), 0.001, 0.999
-    )
-    th[..., 1] = np.clip(
-        data.log_n_grid[node] + 0.3 * dx * rng.standard_normal(node.shape),
-        data.priors.log_n[0] + 1e-6,
-        data.priors.log_n[1] - 1e-6,
+    # bounded coordinates are reflected into their range, never clipped: walkers
+    # clipped onto one value (gamma = 0 for a matt fit) would leave the ensemble
+    # in a flat subspace that its moves, built from walker differences, never leave
+    th[..., 0] = _reflect(take(gamma, node, 1) + 0.02 * rng.standard_normal(node.shape), 0.0, 1.0)
+    th[..., 1] = _reflect(
+        data.log_n_grid[node] + 0.3 * dx * rng.standard_normal(node.shape), *data.priors.log_n
     )
     th[..., 2] = np.log(take(s, node, 1)) + 0.02 * rng.standard_normal(node.shape)
-    th[..., 3] = np.log(take(sig, node, 1)) + 0.05 * rng.standard_normal(node.shape)
+    th[..., 3] = _reflect(
+        np.log(take(sig, node, 1)) + 0.05 * rng.standard_normal(node.shape),
+        *data.priors.log_sigma,
+    )
     if p == 5:
         th[..., 4] = 0.05 + 0.02 * rng.random(node.shape)
-    th[..., 3] = np.clip(
-        th[..., 3], data.priors.log_sigma[0] + 1e-6, data.priors.log_sigma[1] - 1e-6
-    )
     return th
+
+
+def _reflect(x, lo: float, hi: float):
+    """x folded into (lo, hi) by reflection at the bounds (distinct values stay
+    distinct), kept 1e-9 of the width inside them."""
+    width = hi - lo
+    u = np.mod(x - lo, 2.0 * width)
+    u = np.where(u > width, 2.0 * width - u, u)
+    return lo + np.clip(u, 1e-9 * width, (1 - 1e-9) * width)
 
 
 RIDGE_MAX_RMS = 0.05
@@ -678,7 +686,7 @@ def sample_posterior(
     n_walkers: int | None = None,
     burn: int = 100,
     burn_taus: float = 5.0,
-    chunk: int = 100,
+    chunk: int = 50,
     min_tau_multiple: float = 50.0,
     max_steps: int = 8000,
     draws_per_ensemble: int = 1000,
@@ -686,7 +694,7 @@ def sample_posterior(
     seed: int | None = 0,
     jobs: int = 1,
     stream_size: int = 600,
-    slots: int = 128,
+    slots: int = 256,
     marginalise_sigma: bool = True,
     ridge: float | None = RIDGE_MAX_RMS,
     progress=None,
@@ -728,7 +736,10 @@ def sample_posterior(
         every walker's trajectory thinned evenly.
     moves : sequence of (name, weight)
         :class:`BatchedEnsemble`'s moves; ``"n-jump"`` proposes from each
-        facet's :class:`ExponentJump`.
+        facet's :class:`ExponentJump` where sigma is integrated out (3
+        coordinates) and is replaced by ``"de"`` elsewhere (with sigma or a
+        camera exponent sampled, jumps in log n that keep the other
+        coordinates were mostly rejected and lengthened the runs).
     seed : int or None
     jobs : int
         Worker processes.
@@ -826,7 +837,12 @@ def _sample_stream(
     n_f, e, p = len(data.y), n_ensembles, (3 if marginal else data.n_params)
     log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
     coords_of = RidgeCoordinates.of(data, max_rms=ridge if ridge else -1.0)
-    jump = ExponentJump.of(data, marginal) if "n-jump" in [m for m, _ in moves] else None
+    jump = None
+    if "n-jump" in [m for m, _ in moves]:
+        if marginal:
+            jump = ExponentJump.of(data, marginal)
+        else:  # jumps in log n alone rarely fit 4-5 free coordinates: DE instead
+            moves = tuple((("de" if m == "n-jump" else m), w) for m, w in moves)
     burn_chunks = -(-burn // chunk)
     draws_per_ensemble = n_walkers * max(1, draws_per_ensemble // n_walkers)
     out = np.empty((n_f, e, draws_per_ensemble, p))

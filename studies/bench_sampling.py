@@ -49,7 +49,7 @@ PROTOCOL = {  # sample_posterior's defaults, repeated for the stock emcee replic
     "ensembles": 4,
     "burn": 100,
     "burn_taus": 5.0,
-    "chunk": 100,
+    "chunk": 50,
     "tau_multiple": 50.0,
     "max_steps": 8000,
     "draws": 1000,
