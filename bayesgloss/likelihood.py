@@ -497,7 +497,7 @@ def _sigma_marginal_constants(data: CurveData):
     return k, lo_cut, hi_cut, const
 
 
-def log_likelihood_sigma_marginal(theta, data: CurveData) -> np.ndarray:
+def log_likelihood_sigma_marginal(theta, data: CurveData, with_q: bool = False):
     """Log likelihood with sigma integrated out under its prior, (B, K).
 
     With noise sd sigma v_t and Q = sum_t ((y_t - m_t) / v_t)^2 over the T
@@ -515,6 +515,8 @@ def log_likelihood_sigma_marginal(theta, data: CurveData) -> np.ndarray:
         gamma, log n, log s (further columns ignored).
     data : CurveData
         With :func:`sigma_marginal_supported`.
+    with_q : bool
+        Also return Q (B, K), which :func:`draw_log_sigma` needs.
     """
     if not sigma_marginal_supported(data):
         raise ValueError(
@@ -532,23 +534,27 @@ def log_likelihood_sigma_marginal(theta, data: CurveData) -> np.ndarray:
             k, q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), (lo_cut, hi_cut)
         )
         ll = const - log_v - k * np.log(q) + log_int
-    return np.where(k > 0, ll, 0.0)
+    ll = np.where(k > 0, ll, 0.0)
+    return (ll, q) if with_q else ll
 
 
-def log_probability_sigma_marginal(theta, data: CurveData) -> np.ndarray:
+def log_probability_sigma_marginal(theta, data: CurveData, with_q: bool = False):
     """Log posterior density of (gamma, log n, log s) with sigma integrated
-    out, up to a constant, (B, K) for theta (B, K, 3)."""
+    out, up to a constant, (B, K) for theta (B, K, 3); with ``with_q`` also
+    Q (see :func:`log_likelihood_sigma_marginal`)."""
     th = np.asarray(theta, dtype=float)
     p = data.priors
     gamma, log_n, log_s = th[..., 0], th[..., 1], th[..., 2]
     inside = (gamma >= 0) & (gamma <= 1) & (log_n >= p.log_n[0]) & (log_n <= p.log_n[1])
     center = data.log_s_center[:, None] if th.ndim == 3 else data.log_s_center
     lp = -0.5 * ((log_s - center) / p.log_s_sd) ** 2
-    out = np.where(inside, lp + log_likelihood_sigma_marginal(th, data), -np.inf)
-    return np.where(np.isnan(out), -np.inf, out)
+    ll, q = log_likelihood_sigma_marginal(th, data, with_q=True)
+    out = np.where(inside, lp + ll, -np.inf)
+    out = np.where(np.isnan(out), -np.inf, out)
+    return (out, q) if with_q else out
 
 
-def draw_log_sigma(theta, data: CurveData, rng: np.random.Generator) -> np.ndarray:
+def draw_log_sigma(theta, data: CurveData, rng: np.random.Generator, q=None) -> np.ndarray:
     """Draws of log sigma from its conditional posterior given (gamma, log n, log s).
 
     x = Q / 2 sigma^2 is Gamma(T/2, 1) truncated to [Q / 2b^2, Q / 2a^2]
@@ -559,6 +565,14 @@ def draw_log_sigma(theta, data: CurveData, rng: np.random.Generator) -> np.ndarr
     deep in a tail that the function underflows: its asymptotic tail,
     exponential above the mode, x^(T/2 - 1) below it).
 
+    Parameters
+    ----------
+    theta : array_like (B, K, >= 3)
+    data : CurveData
+    rng : numpy.random.Generator
+    q : array_like (B, K), optional
+        Q at theta, where already known (the sampler keeps it).
+
     Returns
     -------
     ndarray (B, K)
@@ -567,8 +581,9 @@ def draw_log_sigma(theta, data: CurveData, rng: np.random.Generator) -> np.ndarr
     la, lb = data.priors.log_sigma
     k = 0.5 * data.valid.sum(axis=1)[:, None].astype(float)
     k = np.broadcast_to(k, th.shape[:2])
-    q, _ = _residual_parts(th, data, with_log=False)
-    q = np.maximum(q, 1e-300)
+    if q is None:
+        q, _ = _residual_parts(th, data, with_log=False)
+    q = np.maximum(np.asarray(q, dtype=float), 1e-300)
     x_lo, x_hi = q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la))
     x = rng.standard_gamma(k)
     out = ~((x >= x_lo) & (x <= x_hi))

@@ -133,12 +133,13 @@ class BatchedEnsemble:
         diff = np.take(flat, base + i, axis=0) - np.take(flat, base + j, axis=0)
         return s + gamma * diff, np.zeros((b, h))
 
-    def step(self, coords, log_p):
+    def step(self, coords, log_p, blob=None):
         """One step (both halves) in place; returns the acceptance mask (B, W).
 
         The random split into halves is shared by the B problems (it only
         decides which walkers move first); every other random number is
-        drawn per problem and walker.
+        drawn per problem and walker. Where ``log_prob`` returns (log p,
+        blob), ``blob`` (B, W) keeps the blob of every walker's position.
         """
         w = coords.shape[1]
         # = rng.choice(len(moves), p=weights), the same draw without its overhead
@@ -151,28 +152,45 @@ class BatchedEnsemble:
             s = coords[:, idx]
             q, factor = self._propose(move, s, coords[:, cidx])
             lp_new = self.log_prob(q)
+            if isinstance(lp_new, tuple):
+                lp_new, blob_new = lp_new
             lp_old = log_p[:, idx]
             with np.errstate(invalid="ignore"):
                 acc = np.log(self.rng.random(lp_new.shape)) < factor + lp_new - lp_old
             coords[:, idx] = np.where(acc[..., None], q, s)
             log_p[:, idx] = np.where(acc, lp_new, lp_old)
+            if blob is not None:
+                blob[:, idx] = np.where(acc, blob_new, blob[:, idx])
             accepted[:, idx] = acc
         return accepted
 
-    def run(self, coords, n_steps: int, log_p=None):
-        """Advance ``n_steps``; returns (chain (n, B, W, P), log_p (n, B, W), acc rate (B,))."""
+    def run(self, coords, n_steps: int, log_p=None, blob=None):
+        """Advance ``n_steps``; returns (chain (n, B, W, P), log_p (n, B, W), acc rate (B,)).
+
+        Where ``log_prob`` returns (log p, blob), the blobs of the chain's
+        positions are left in ``self.blobs`` (n, B, W); pass the blobs of the
+        starting positions with their ``log_p``.
+        """
         coords = np.array(coords, dtype=float)
-        log_p = self.log_prob(coords) if log_p is None else np.array(log_p)
+        if log_p is None:
+            log_p = self.log_prob(coords)
+            if isinstance(log_p, tuple):
+                log_p, blob = log_p
+        log_p = np.array(log_p)
+        blob = None if blob is None else np.array(blob, dtype=float)
         b, w, p = coords.shape
         if w < 2 * p or w % 2:
             raise ValueError(f"need an even number of walkers >= 2 x {p} dims, got {w}")
         chain = np.empty((n_steps, b, w, p))
         lps = np.empty((n_steps, b, w))
+        self.blobs = None if blob is None else np.empty((n_steps, b, w))
         acc = np.zeros((b, w))
         for t in range(n_steps):
-            acc += self.step(coords, log_p)
+            acc += self.step(coords, log_p, blob)
             chain[t] = coords
             lps[t] = log_p
+            if blob is not None:
+                self.blobs[t] = blob
         return chain, lps, acc.mean(axis=1) / max(n_steps, 1)
 
 
@@ -515,9 +533,14 @@ class RidgeCoordinates:
 
         def in_x(x):
             th, log_jac = self.to_theta(x)
+            out = log_prob(th, data)
+            blob = None
+            if isinstance(out, tuple):  # (log p, blob): the blob passes through
+                out, blob = out
             with np.errstate(invalid="ignore"):
-                out = log_prob(th, data) + log_jac  # NaN where s <= 0
-            return np.where(np.isnan(out), -np.inf, out)
+                out = out + log_jac  # NaN where s <= 0
+            out = np.where(np.isnan(out), -np.inf, out)
+            return out if blob is None else (out, blob)
 
         return in_x
 
@@ -530,18 +553,20 @@ class ExponentJump:
     between frames, and curves of quite different exponents fit almost
     equally well: the posterior of log n then has separated modes, which
     the ensemble moves (built from differences of walkers) rarely cross.
-    This move proposes each walker's log n afresh, keeping its other
-    sampling coordinates, from a fixed density q built from the facet's
-    profile posterior of log n: on M cells of equal width h spanning the
-    prior range, q_m = (1 - eps) exp(l_m) / sum exp(l) + eps / M, with l_m
-    the log posterior density at the cell centre with gamma and s at their
-    weighted least-squares values there (and sigma at the fit's rms, where
-    it is sampled). The floor eps keeps every cell reachable. Metropolis-
-    Hastings with the independence factor q(x_n) / q(y_n) leaves the
-    posterior invariant (Tierney 1994, "Markov chains for exploring posterior
-    distributions", Ann. Stat. 22, sec. 2.3.3). In ridge coordinates the
-    other coordinates are standardised offsets from the ridge at n, so the
-    walker lands on the ridge of the new exponent.
+    This move proposes each walker's log n afresh from a fixed density q
+    built from the facet's profile posterior of log n: on M cells of equal
+    width h spanning the prior range, q_m = (1 - eps) exp(l_m) / sum exp(l)
+    + eps / M, with l_m the log posterior density at the cell centre with
+    gamma and s (and sigma, where it is sampled) at their weighted
+    least-squares values c_m there. The floor eps keeps every cell reachable.
+
+    The walker's other coordinates follow the fit: z' = z + c(m') - c(m) for
+    a move from cell m to m' (in ridge coordinates c = 0: they already are
+    offsets from the ridge at n). Given the two exponents this is a
+    translation, whose reverse is the reverse move's, so Metropolis-Hastings
+    with the independence factor q(x_n) / q(y_n) leaves the posterior
+    invariant (Tierney 1994, "Markov chains for exploring posterior
+    distributions", Ann. Stat. 22, sec. 2.3.3).
 
     Attributes
     ----------
@@ -551,6 +576,8 @@ class ExponentJump:
         log q per unit log n in each cell.
     cdf : ndarray (B, M)
         Cumulative cell probabilities (last exactly 1).
+    fit : ndarray (B, M, P)
+        c_m in plain coordinates (the log n column unused).
     column : ndarray (B,) of int
         The sampling coordinate that holds log n (0 in ridge coordinates,
         1 in plain ones).
@@ -560,6 +587,7 @@ class ExponentJump:
     width: float
     log_q: np.ndarray
     cdf: np.ndarray
+    fit: np.ndarray
     column: np.ndarray
 
     @classmethod
@@ -576,14 +604,14 @@ class ExponentJump:
         lo, hi = data.priors.log_n
         width = (hi - lo) / cells
         centres = lo + width * (np.arange(cells) + 0.5)
-        log_post = np.concatenate(
-            [
-                _profile_log_posterior(
-                    data.take(np.arange(i, min(i + block, len(data.y)))), centres, marginal
-                )
-                for i in range(0, len(data.y), block)
-            ]
-        )
+        parts = [
+            _profile_log_posterior(
+                data.take(np.arange(i, min(i + block, len(data.y)))), centres, marginal
+            )
+            for i in range(0, len(data.y), block)
+        ]
+        log_post = np.concatenate([lp for lp, _ in parts])
+        fit = np.concatenate([th for _, th in parts])
         with np.errstate(invalid="ignore"):
             top = np.max(log_post, axis=1, keepdims=True)
             w = np.exp(log_post - top)
@@ -593,13 +621,17 @@ class ExponentJump:
         q = (1.0 - floor) * w + floor / cells
         cdf = np.cumsum(q, axis=1)
         cdf /= cdf[:, -1:]
-        return cls(float(lo), float(width), np.log(q / width), cdf, np.ones(len(q), dtype=int))
+        column = np.ones(len(q), dtype=int)
+        return cls(float(lo), float(width), np.log(q / width), cdf, fit, column)
 
     def take(self, index, ridge=None) -> ExponentJump:
         """Rows ``index``; ``ridge`` (bool per row) marks ridge coordinates."""
         idx = np.asarray(index)
         col = self.column[idx] if ridge is None else np.where(ridge, 0, 1)
-        return ExponentJump(self.lo, self.width, self.log_q[idx], self.cdf[idx], col)
+        fit = self.fit[idx]
+        if ridge is not None:
+            fit = np.where(np.asarray(ridge)[:, None, None], 0.0, fit)
+        return ExponentJump(self.lo, self.width, self.log_q[idx], self.cdf[idx], fit, col)
 
     def propose(self, s, rng):
         """Proposals (B, H, P) for walkers s and the log factor log q(x) - log q(y)."""
@@ -617,12 +649,15 @@ class ExponentJump:
         old_cell = np.clip(((old - self.lo) / self.width).astype(np.intp), 0, m - 1)
         flat = self.log_q.ravel()
         factor = flat[old_cell + row * m] - flat[cell + row * m]
-        return np.where(cols, new[..., None], s), factor
+        fit = self.fit.reshape(b * m, -1)[:, :p]
+        moved = s + np.take(fit, cell + row * m, 0) - np.take(fit, old_cell + row * m, 0)
+        return np.where(cols, new[..., None], moved), factor
 
 
-def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool) -> np.ndarray:
-    """Log posterior density at each log n (B, M), gamma and s (and sigma)
-    at their weighted least-squares values there (see :class:`ExponentJump`)."""
+def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool):
+    """Log posterior density at each log n (B, M), with gamma and s (and sigma)
+    at their weighted least-squares values there, and those values (B, M, P)
+    (see :class:`ExponentJump`)."""
     grid = data.log_n_grid
     n = len(grid)
     pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
@@ -641,7 +676,7 @@ def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool) -> np.ndar
     th[..., 1] = log_n
     th[..., 2] = np.where(ok, np.log(np.where(ok, s, 1.0)), data.log_s_center[:, None])
     if marginal:
-        return lk.log_probability_sigma_marginal(th, data)
+        return lk.log_probability_sigma_marginal(th, data), th
     n_valid = np.maximum(data.valid.sum(1), 1)[:, None]
     mu = a[..., None] * d + b[..., None] * g
     rms = np.sqrt(np.sum(w * (y - mu) ** 2, -1) / n_valid)
@@ -649,7 +684,7 @@ def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool) -> np.ndar
     th[..., 3] = np.clip(np.log(np.maximum(rms, 1e-300)), lo_s + 1e-6, hi_s - 1e-6)
     if data.n_params == 5:
         th[..., 4] = 0.0  # g = 1
-    return lk.log_probability(th, data)
+    return lk.log_probability(th, data), th
 
 
 @dataclass
@@ -835,7 +870,14 @@ def _sample_stream(
     """One stream of facets through ``slots`` places, E ensembles each (see above)."""
     rng = np.random.default_rng(seed_seq)
     n_f, e, p = len(data.y), n_ensembles, (3 if marginal else data.n_params)
-    log_prob = lk.log_probability_sigma_marginal if marginal else lk.log_probability
+    if marginal:  # the density also hands back Q, kept to draw sigma from at the end
+
+        def log_prob(theta, d):
+            return lk.log_probability_sigma_marginal(theta, d, with_q=True)
+
+    else:
+        log_prob = lk.log_probability
+    n_keep = p + 1 if marginal else p  # kept chains carry Q as a last column
     coords_of = RidgeCoordinates.of(data, max_rms=ridge if ridge else -1.0)
     jump = None
     if "n-jump" in [m for m, _ in moves]:
@@ -845,7 +887,7 @@ def _sample_stream(
             moves = tuple((("de" if m == "n-jump" else m), w) for m, w in moves)
     burn_chunks = -(-burn // chunk)
     draws_per_ensemble = n_walkers * max(1, draws_per_ensemble // n_walkers)
-    out = np.empty((n_f, e, draws_per_ensemble, p))
+    out = np.empty((n_f, e, draws_per_ensemble, n_keep))
     tau_out = np.full((n_f, e, p), np.nan)
     steps_out = np.zeros(n_f, dtype=int)
     acc_out = np.zeros((n_f, e))
@@ -854,6 +896,7 @@ def _sample_stream(
     facets: list[int] = []  # facet of each place
     coords = np.empty((0, n_walkers, p))
     logp = np.empty((0, n_walkers))
+    blob = np.empty((0, n_walkers)) if marginal else None  # Q at every walker
     age = np.empty(0, dtype=int)  # chunks run, per place
     next_check = np.empty(0)  # production steps at which to estimate tau next
     thin = 2  # stored chains keep every 2nd step (tau >> 2 steps here)
@@ -871,16 +914,19 @@ def _sample_stream(
             sub = data.take(rows)
             start = initial_ensemble(sub, n_walkers, rng)[..., :p]
             x = coords_of.take(rows).from_theta(start)
-            lp = coords_of.take(rows).log_prob(log_prob, sub)(x)
+            lp, q0 = _with_blob(coords_of.take(rows).log_prob(log_prob, sub)(x))
             # a start the ridge map cannot represent: that facet keeps plain coordinates
-            lost = np.any(~np.isfinite(lp) & np.isfinite(log_prob(start, sub)), axis=1)
+            plain_ok = np.isfinite(_with_blob(log_prob(start, sub))[0])
+            lost = np.any(~np.isfinite(lp) & plain_ok, axis=1)
             if np.any(lost):
                 coords_of.active[np.unique(rows[lost])] = False
                 x = coords_of.take(rows).from_theta(start)
-                lp = coords_of.take(rows).log_prob(log_prob, sub)(x)
+                lp, q0 = _with_blob(coords_of.take(rows).log_prob(log_prob, sub)(x))
             facets += new
             coords = np.concatenate([coords, x])
             logp = np.concatenate([logp, lp])
+            if marginal:
+                blob = np.concatenate([blob, q0])
             age = np.concatenate([age, np.zeros(len(new), dtype=int)])
             next_check = np.concatenate([next_check, np.full(len(new), first_check)])
             acc_sum = np.concatenate([acc_sum, np.zeros((len(new), e))])
@@ -891,8 +937,10 @@ def _sample_stream(
         sampler.log_prob = batch_coords.log_prob(log_prob, data.take(rows))
         if jump is not None:
             sampler.jump = jump.take(rows, batch_coords.active)
-        ch, lp, acc = sampler.run(coords, chunk, logp)
+        ch, lp, acc = sampler.run(coords, chunk, logp, blob)
         coords, logp = ch[-1].copy(), lp[-1].copy()
+        if marginal:
+            blob = sampler.blobs[-1].copy()
         age += 1
         a = len(facets)
         kept_steps = ch[::thin]  # sampling coordinates to parameters, (n, a E, W, P)
@@ -901,7 +949,9 @@ def _sample_stream(
             kept_steps.transpose(1, 0, 2, 3).reshape(a * e, n_kept * n_walkers, p)
         )[0]
         ch = th.reshape(a * e, n_kept, n_walkers, p).transpose(1, 0, 2, 3)
-        ch = ch.reshape(n_kept, a, e, n_walkers, p)
+        if marginal:
+            ch = np.concatenate([ch, sampler.blobs[::thin][..., None]], axis=-1)
+        ch = ch.reshape(n_kept, a, e, n_walkers, n_keep)
         acc = acc.reshape(a, e)
         finished = np.zeros(a, dtype=bool)
         due = []  # places whose run is measured now
@@ -921,7 +971,8 @@ def _sample_stream(
         for n_kept in {len(kept[facets[k]][0]) for k in due}:
             group = [k for k in due if len(kept[facets[k]][0]) == n_kept]
             runs = np.stack([kept[facets[k]][0] for k in group], axis=1)
-            t = thin * integrated_time(runs.reshape(n_kept, len(group), e * n_walkers, p))
+            runs = runs[..., :p].reshape(n_kept, len(group), e * n_walkers, p)
+            t = thin * integrated_time(runs)
             taus.update(zip(group, t, strict=True))
         checks = {}
         for k in due:
@@ -959,14 +1010,22 @@ def _sample_stream(
             facets = [f for f, k in zip(facets, keep_places, strict=True) if k]
             rows = np.repeat(keep_places, e)
             coords, logp = coords[rows], logp[rows]
+            if marginal:
+                blob = blob[rows]
             age, acc_sum = age[keep_places], acc_sum[keep_places]
             next_check = next_check[keep_places]
     if marginal:  # log sigma from its conditional posterior at every kept draw
+        out, q = out[..., :p], out[..., p].reshape(n_f, e * draws_per_ensemble)
         th = out.reshape(n_f, e * draws_per_ensemble, p)
-        log_sigma = lk.draw_log_sigma(th, data, rng).reshape(n_f, e, draws_per_ensemble, 1)
-        out = np.concatenate([out, log_sigma], axis=-1)
+        log_sigma = lk.draw_log_sigma(th, data, rng, q=q)
+        out = np.concatenate([out, log_sigma.reshape(n_f, e, draws_per_ensemble, 1)], axis=-1)
         tau_out = np.concatenate([tau_out, np.full((n_f, e, 1), np.nan)], axis=-1)
     return out, tau_out, steps_out, acc_out
+
+
+def _with_blob(value):
+    """(log p, blob) from a density that may or may not return a blob."""
+    return value if isinstance(value, tuple) else (value, None)
 
 
 def _ensemble_draws(run, n_draws: int) -> np.ndarray:

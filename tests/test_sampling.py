@@ -244,9 +244,8 @@ def test_exponent_jump_gets_mode_weights_of_a_bimodal_target():
     q /= q.sum()
     cdf = np.cumsum(q)
     cdf /= cdf[-1]
-    jump = sampling.ExponentJump(
-        lo, width, np.tile(np.log(q / width), (b, 1)), np.tile(cdf, (b, 1)), np.zeros(b, int)
-    )
+    log_q, fit = np.tile(np.log(q / width), (b, 1)), np.zeros((b, cells, p))
+    jump = sampling.ExponentJump(lo, width, log_q, np.tile(cdf, (b, 1)), fit, np.zeros(b, int))
     rng = np.random.default_rng(5)
     start = rng.normal(0, 0.01, (b, w, p)) + [3.0, 0.0, 0.0]
     fractions = {}
