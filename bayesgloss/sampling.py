@@ -452,13 +452,17 @@ class RidgeCoordinates:
         )
 
     @property
-    def _nodes(self) -> np.ndarray:
-        """(c1, c2, L11, L21, L22) at every node and its successor, (B*N, 10)."""
+    def _nodes(self) -> tuple:
+        """(c1, c2, L11, L21, L22) at every node, and their steps to the next
+        node, each (5, B*N) (one contiguous row per quantity)."""
         nodes = self.__dict__.get("_nodes_cache")
         if nodes is None:
             v = np.concatenate([self.center, self.factor], axis=-1)  # (B, N, 5)
             nxt = np.concatenate([v[:, 1:], v[:, -1:]], axis=1)
-            nodes = np.ascontiguousarray(np.concatenate([v, nxt - v], -1).reshape(-1, 10))
+            nodes = (
+                np.ascontiguousarray(v.reshape(-1, 5).T),
+                np.ascontiguousarray((nxt - v).reshape(-1, 5).T),
+            )
             object.__setattr__(self, "_nodes_cache", nodes)
         return nodes
 
@@ -472,14 +476,17 @@ class RidgeCoordinates:
         return off
 
     def _at(self, log_n):
-        """(c1, c2, L11, L21, L22) interpolated at log n (B, K): (B, K, 5)."""
+        """(c1, c2, L11, L21, L22) interpolated at log n (B, K): (5, B, K)."""
         grid = self.log_n_grid
         n = len(grid)
         b, k = log_n.shape
         pos = np.minimum(np.maximum(log_n - grid[0], 0.0) / (grid[1] - grid[0]), n - 1.000001)
         j = pos.astype(np.intp)
-        rows = np.take(self._nodes, (j + self._offsets).ravel(), 0).reshape(b, k, 10)
-        return rows[..., :5] + (pos - j)[..., None] * rows[..., 5:]
+        idx = (j + self._offsets).ravel()
+        value, step = self._nodes
+        v = np.take(value, idx, axis=1)
+        v += (pos - j).ravel() * np.take(step, idx, axis=1)
+        return v.reshape(5, b, k)
 
     @property
     def _any_active(self) -> bool:
@@ -497,8 +504,8 @@ class RidgeCoordinates:
         if not any_active:
             return x, np.zeros(x.shape[:2])
         v = self._at(x[..., 0])
-        a = v[..., 0] + v[..., 2] * x[..., 1]
-        b = v[..., 1] + v[..., 3] * x[..., 1] + v[..., 4] * x[..., 2]
+        a = v[0] + v[2] * x[..., 1]
+        b = v[1] + v[3] * x[..., 1] + v[4] * x[..., 2]
         with np.errstate(invalid="ignore", divide="ignore"):
             s = a + b
             log_s = np.log(s)  # NaN (or -inf) where s <= 0
@@ -507,7 +514,7 @@ class RidgeCoordinates:
             th[..., 1] = x[..., 0]
             th[..., 2] = log_s
             th[..., 3:] = x[..., 3:]
-            log_jac = np.log(v[..., 2] * v[..., 4]) - 2.0 * log_s
+            log_jac = np.log(v[2] * v[4]) - 2.0 * log_s
         if all_active:
             return th, log_jac
         act = self.active[:, None, None]
@@ -519,8 +526,8 @@ class RidgeCoordinates:
         v = self._at(th[..., 1])
         s = np.exp(th[..., 2])
         a, b = s * (1.0 - th[..., 0]), s * th[..., 0]
-        u1 = (a - v[..., 0]) / v[..., 2]
-        u2 = (b - v[..., 1] - v[..., 3] * u1) / v[..., 4]
+        u1 = (a - v[0]) / v[2]
+        u2 = (b - v[1] - v[3] * u1) / v[4]
         act = self.active[:, None]
         x = th.copy()
         x[..., 0] = np.where(act, th[..., 1], th[..., 0])
