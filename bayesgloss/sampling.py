@@ -224,7 +224,10 @@ def integrated_time(chain, c: float = 5.0) -> np.ndarray:
     ndarray (B, P)
         [steps]; NaN where a parameter does not move at all.
     """
-    x = np.moveaxis(np.asarray(chain, dtype=float), 0, -1)  # (B, W, P, N)
+    x = np.asarray(chain)
+    if x.dtype != np.float32:  # float32 chains stay float32 (tau to ~1e-5)
+        x = x.astype(float)
+    x = np.moveaxis(x, 0, -1)  # (B, W, P, N)
     n = x.shape[-1]
     x = x - x.mean(axis=-1, keepdims=True)
     var = np.einsum("...i,...i->...", x, x)  # lag-0 autocovariance x N, (B, W, P)
@@ -744,7 +747,8 @@ def sample_posterior(
     moves=FACET_MOVES,
     seed: int | None = 0,
     jobs: int = 1,
-    stream_size: int = 600,
+    stream_size: int = 1200,
+    min_streams: int = 2,
     slots: int = 256,
     marginalise_sigma: bool = True,
     ridge: float | None = RIDGE_MAX_RMS,
@@ -752,7 +756,9 @@ def sample_posterior(
 ) -> PosteriorSamples:
     """Sample every facet's posterior with the batched ensemble sampler.
 
-    Facets are dealt, in order, into streams of at most ``stream_size``;
+    Facets are dealt, in order, into streams of at most ``stream_size``
+    (and at least ``min_streams`` streams, so that two processes share even
+    a small set);
     stream i draws its random numbers from ``SeedSequence(seed).spawn(n)[i]``
     and runs its facets through ``slots`` vectorised places: a facet that has
     converged leaves its place to the next one waiting, so the batch stays
@@ -795,7 +801,11 @@ def sample_posterior(
     jobs : int
         Worker processes.
     stream_size, slots : int
-        Facets per stream, and facets sampled at once within a stream.
+        Facets per stream at most, and facets sampled at once within a
+        stream. Every stream ends with a tail of its slowest facets run in a
+        nearly empty batch, so fewer, longer streams cost less.
+    min_streams : int
+        Streams at least (where there are that many facets).
     marginalise_sigma : bool
         Where the likelihood allows it
         (:func:`bayesgloss.likelihood.sigma_marginal_supported`), sample
@@ -822,7 +832,7 @@ def sample_posterior(
     marginal = marginalise_sigma and lk.sigma_marginal_supported(data)
     p = 3 if marginal else data.n_params  # dimensions the ensembles explore
     walkers = 2 * p if n_walkers is None else int(n_walkers)
-    n_streams = max(1, -(-n_f // stream_size))
+    n_streams = max(min(min_streams, n_f), -(-n_f // stream_size), 1)
     bounds = np.linspace(0, n_f, n_streams + 1).round().astype(int)
     seeds = np.random.SeedSequence(seed).spawn(n_streams)
     args = dict(
@@ -988,7 +998,9 @@ def _sample_stream(
             group = [k for k in due if len(kept[facets[k]][0]) == n_kept]
             runs = np.stack([kept[facets[k]][0] for k in group], axis=1)
             runs = runs[..., :p].reshape(n_kept, len(group), e * n_walkers, p)
-            t = thin * integrated_time(runs)
+            # every 2nd kept step (4th step) suffices for tau >> 4 steps and
+            # halves the transforms (for small tau it errs long, never short)
+            t = 2 * thin * integrated_time(runs[::2])
             taus.update(zip(group, t, strict=True))
         checks = {}
         for k in due:

@@ -287,6 +287,7 @@ def fit_groups(
     opts = dict(cfg.get("sampler", {}))
     n = len(y)
     opts.setdefault("stream_size", n)  # one stream: the unit's facets batched together
+    opts.setdefault("min_streams", 1)
     fit_seed, *pop_seeds = seed.spawn(1 + len(groups))
     samples = sampling.sample_posterior(data, seed=seed_int(fit_seed), jobs=1, **opts)
     gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
