@@ -304,15 +304,29 @@ def log_prior(theta, data: CurveData) -> np.ndarray:
     return np.where(inside, lp, -np.inf)
 
 
+def grid_position(log_n, log_n_grid):
+    """Cell j and fraction w of log n on a uniform grid, clamped to the grid:
+    a value at node j + w lies between nodes j and j + 1 (j <= N - 2).
+
+    Returns
+    -------
+    j : ndarray of intp, w : ndarray
+        On the shape of ``log_n``.
+    """
+    grid = log_n_grid
+    last = len(grid) - 1.000001
+    pos = np.minimum(np.maximum(log_n - grid[0], 0.0) / (grid[1] - grid[0]), last)
+    j = pos.astype(np.intp)
+    return j, pos - j
+
+
 def predict(theta, data: CurveData) -> np.ndarray:
     """Noiseless prediction on the observed scale, (B, K, T) for theta (B, K, P)."""
     th = np.asarray(theta, dtype=float)
     b, k = th.shape[:2]
-    grid = data.log_n_grid
-    n = len(grid)
-    pos = np.clip((th[..., 1] - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
-    j = pos.astype(np.intp)  # (B, K)
-    w = (pos - j)[..., None]
+    n = len(data.log_n_grid)
+    j, w = grid_position(th[..., 1], data.log_n_grid)  # (B, K)
+    w = w[..., None]
     # one gather of the bracketing table rows (G_j, G_j+1 - G_j) per (b, k)
     rows = data.glossy_pairs[(np.arange(b)[:, None] * n + j).ravel()].reshape(b, k, 2, -1)
     glossy = rows[:, :, 0] + w * rows[:, :, 1]
@@ -339,14 +353,11 @@ def _fast_relative_terms(th, data: CurveData, with_log: bool = True):
     b, k = th.shape[:2]
     t = tab.y.shape[1]
     f32 = np.float32
-    grid = data.log_n_grid
-    n = len(grid)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        pos = np.minimum(np.maximum(th[..., 1] - grid[0], 0.0) / (grid[1] - grid[0]), n - 1.000001)
-        j = pos.astype(np.intp)
+        j, w = grid_position(th[..., 1], data.log_n_grid)
         rows = (j + tab.offsets).ravel()
         m = np.take(tab.dg, rows, axis=0)
-        m *= (pos - j).astype(f32).reshape(-1, 1)
+        m *= w.astype(f32).reshape(-1, 1)
         m += np.take(tab.g0, rows, axis=0)  # G(n) - D, linear in log n
         m *= th[..., 0].astype(f32).reshape(-1, 1)
         m3 = m.reshape(b, k, t)
@@ -447,14 +458,7 @@ def _log_gamma_interval(k, x_lo, x_hi, cuts=None):
         The tail cuts above for this k, when precomputed.
     """
     k = np.asarray(k, dtype=float)  # cuts on k's own shape, before broadcasting
-    if cuts is None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lo_cut = np.minimum(
-                np.exp((np.log(_TAIL_DROP / 2) + special.gammaln(k + 1.0)) / k), 0.5 * k
-            )
-        hi_cut = np.where(k > 500, np.inf, k + 12.0 * np.sqrt(k) + 45.0)
-    else:
-        lo_cut, hi_cut = cuts
+    lo_cut, hi_cut = _tail_cuts(k) if cuts is None else cuts
     cut_lo = x_lo > lo_cut  # the interval cuts the lower tail off
     cut_hi = x_hi < hi_cut  # ... the upper tail
     out = np.zeros(x_lo.shape)
@@ -482,6 +486,18 @@ def _log_gamma_interval(k, x_lo, x_hi, cuts=None):
     return out
 
 
+def _tail_cuts(k):
+    """(x_lo, x_hi) beyond which the lower and upper tails of the regularised
+    incomplete gamma function of order k are below 1e-17 (see
+    :func:`_log_gamma_interval`)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo_cut = np.minimum(
+            np.exp((np.log(_TAIL_DROP / 2) + special.gammaln(k + 1.0)) / k), 0.5 * k
+        )
+    hi_cut = np.where(k > 500, np.inf, k + 12.0 * np.sqrt(k) + 45.0)
+    return lo_cut, hi_cut
+
+
 def _sigma_marginal_constants(data: CurveData):
     """Per-facet constants of :func:`log_likelihood_sigma_marginal`, (B, 1)
     each: k = T/2, the tail cuts of :func:`_log_gamma_interval`, and
@@ -489,12 +505,8 @@ def _sigma_marginal_constants(data: CurveData):
     la, lb = data.priors.log_sigma
     k = 0.5 * data.valid.sum(axis=1)[:, None].astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
-        lo_cut = np.minimum(
-            np.exp((np.log(_TAIL_DROP / 2) + special.gammaln(k + 1.0)) / k), 0.5 * k
-        )
         const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
-    hi_cut = np.where(k > 500, np.inf, k + 12.0 * np.sqrt(k) + 45.0)
-    return k, lo_cut, hi_cut, const
+    return (k, *_tail_cuts(k), const)
 
 
 def log_likelihood_sigma_marginal(theta, data: CurveData, with_q: bool = False):

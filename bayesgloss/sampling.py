@@ -186,9 +186,7 @@ class BatchedEnsemble:
         """
         coords = np.array(coords, dtype=float)
         if log_p is None:
-            log_p = self.log_prob(coords)
-            if isinstance(log_p, tuple):
-                log_p, blob = log_p
+            log_p, blob = _with_blob(self.log_prob(coords))
         log_p = np.array(log_p)
         blob = None if blob is None else np.array(blob, dtype=float)
         b, w, p = coords.shape
@@ -493,19 +491,17 @@ class RidgeCoordinates:
 
     def _at(self, log_n):
         """(c1, c2, L11, L21, L22) interpolated at log n (B, K): (5, B, K)."""
-        grid = self.log_n_grid
-        n = len(grid)
         b, k = log_n.shape
-        pos = np.minimum(np.maximum(log_n - grid[0], 0.0) / (grid[1] - grid[0]), n - 1.000001)
-        j = pos.astype(np.intp)
+        j, w = lk.grid_position(log_n, self.log_n_grid)
         idx = (j + self._offsets).ravel()
         value, step = self._nodes
         v = np.take(value, idx, axis=1)
-        v += (pos - j).ravel() * np.take(step, idx, axis=1)
+        v += w.ravel() * np.take(step, idx, axis=1)
         return v.reshape(5, b, k)
 
     @property
-    def _any_active(self) -> bool:
+    def _active_flags(self) -> tuple[bool, bool]:
+        """Whether any, and whether all, facets use ridge coordinates."""
         flags = self.__dict__.get("_flags")
         if flags is None:
             flags = (bool(self.active.any()), bool(self.active.all()))
@@ -516,7 +512,7 @@ class RidgeCoordinates:
         """theta (B, K, P) and log |d theta / d x| (B, K) at x (B, K, P);
         NaN where x maps to no scale s > 0 (the caller's density is then -inf)."""
         x = np.asarray(x, dtype=float)
-        any_active, all_active = self._any_active
+        any_active, all_active = self._active_flags
         if not any_active:
             return x, np.zeros(x.shape[:2])
         v = self._at(x[..., 0])
@@ -556,10 +552,7 @@ class RidgeCoordinates:
 
         def in_x(x):
             th, log_jac = self.to_theta(x)
-            out = log_prob(th, data)
-            blob = None
-            if isinstance(out, tuple):  # (log p, blob): the blob passes through
-                out, blob = out
+            out, blob = _with_blob(log_prob(th, data))  # a blob passes through
             with np.errstate(invalid="ignore"):
                 out = out + log_jac  # NaN where s <= 0
             out = np.where(np.isnan(out), -np.inf, out)
@@ -681,14 +674,10 @@ def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool):
     """Log posterior density at each log n (B, M), with gamma and s (and sigma)
     at their weighted least-squares values there, and those values (B, M, P)
     (see :class:`ExponentJump`)."""
-    grid = data.log_n_grid
-    n = len(grid)
-    pos = np.clip((log_n - grid[0]) / (grid[1] - grid[0]), 0.0, n - 1.000001)
-    j = pos.astype(np.intp)
-    frac = (pos - j)[None, :, None]
-    g = data.glossy[:, j] + frac * (data.glossy[:, j + 1] - data.glossy[:, j])  # (B, M, T)
+    j, frac = lk.grid_position(log_n, data.log_n_grid)
+    g = data.glossy[:, j] + frac[None, :, None] * (data.glossy[:, j + 1] - data.glossy[:, j])
     _, _, _, w = _node_fits(data, weights=True)
-    w = w[:, np.rint(pos).astype(np.intp)]
+    w = w[:, np.rint(j + frac).astype(np.intp)]  # weights of the nearest node
     y, d = data.y[:, None, :], data.diffuse[:, None, :]
     y = np.maximum(y, 0.0) if data.camera == "power" else y
     a, b = _nonnegative_pair(y, d, g, w)
