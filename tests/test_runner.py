@@ -60,7 +60,9 @@ def test_killed_run_resumes_without_redoing_finished_units(bundles, tmp_path):
         "--seed",
         "3",
     ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     deadline = time.time() + 120
     # wait until the first unit is complete, then kill the whole run for real
     while time.time() < deadline:
@@ -68,7 +70,7 @@ def test_killed_run_resumes_without_redoing_finished_units(bundles, tmp_path):
         if done:
             break
         time.sleep(0.05)
-    os.kill(proc.pid, signal.SIGKILL)
+    os.killpg(proc.pid, signal.SIGKILL)  # the run and its worker processes, as a user's kill
     proc.wait()
     assert proc.returncode == -signal.SIGKILL
     finished = {p.name: p.stat().st_mtime_ns for p in out.glob("*") if not p.name.startswith(".")}
