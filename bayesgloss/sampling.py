@@ -231,7 +231,9 @@ def integrated_time(chain, c: float = 5.0) -> np.ndarray:
         x = x.astype(float)
     x = np.moveaxis(x, 0, -1)  # (B, W, P, N)
     n = x.shape[-1]
-    x = x - x.mean(axis=-1, keepdims=True)
+    # the mean in float64: a float32 sum of values far from 0 (log s ~ 12 with
+    # sd 4e-5) errs by more than their spread and would make tau enormous
+    x = x - x.mean(axis=-1, keepdims=True, dtype=np.float64).astype(x.dtype)
     var = np.einsum("...i,...i->...", x, x)  # lag-0 autocovariance x N, (B, W, P)
     moving = var > 0  # walkers whose series varies
     f = np.fft.rfft(x, n=_fast_length(2 * n), axis=-1)
@@ -920,6 +922,9 @@ def _sample_stream(
     next_check = np.empty(0)  # production steps at which to estimate tau next
     thin = 2  # stored chains keep every 2nd step (tau >> 2 steps here)
     kept: dict[int, list[np.ndarray]] = {}
+    # kept chains are float32 offsets from each facet's first kept mean, so that
+    # they resolve posteriors far narrower than the parameters' values
+    origin: dict[int, np.ndarray] = {}
     acc_sum = np.empty((0, e))
     # no posterior here mixes in under 10 steps: first look at 10 x the multiple
     first_check = max(chunk, 10.0 * min_tau_multiple)
@@ -977,7 +982,10 @@ def _sample_stream(
         for k, f in enumerate(facets):
             if age[k] <= burn_chunks:
                 continue
-            kept[f].append(ch[:, k].astype(np.float32))
+            if f not in origin:
+                origin[f] = ch[0, k].mean(axis=(0, 1))
+                origin[f][p:] = 0.0  # Q (a positive sum of squares) as it is
+            kept[f].append((ch[:, k] - origin[f]).astype(np.float32))
             acc_sum[k] += acc[k]
             n_steps = (age[k] - burn_chunks) * chunk
             if n_steps >= next_check[k] or n_steps >= max_steps:
@@ -1006,7 +1014,8 @@ def _sample_stream(
             run = run[min(drop, len(run) // 2) :]
             enough = len(run) * thin >= t_max * min_tau_multiple
             need = t_max * min_tau_multiple + drop * thin
-            checks[k] = (_ensemble_draws(run, draws_per_ensemble), enough, need)  # (E, S, P)
+            draws = _ensemble_draws(run, draws_per_ensemble) + origin[facets[k]]  # (E, S, P)
+            checks[k] = (draws, enough, need)
         # R-hat and ESS of gamma for every run long enough, at once
         ready = [k for k in due if checks[k][1]]
         converged = {}
@@ -1020,7 +1029,7 @@ def _sample_stream(
                 out[f] = draws
                 tau_out[f], steps_out[f] = taus[k], n_steps
                 acc_out[f] = acc_sum[k] / (age[k] - burn_chunks)
-                del kept[f]
+                del kept[f], origin[f]
                 finished[k] = True
             elif enough:  # long enough but not yet converged: 25 % more steps
                 next_check[k] = n_steps + max(chunk, 0.25 * n_steps)

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import integrate, special, stats
 
 from bayesgloss import likelihood as lk
 from bayesgloss.render import FacetBases
@@ -138,7 +138,6 @@ def test_simulated_noise_has_the_model_scale():
 def _brute_sigma(th, data, n=40001):
     """log of int L(theta, sigma) p(sigma) d sigma by quadrature in log sigma, and
     the grid and normalised posterior of log sigma (the slow, scipy-checked path)."""
-    from scipy import special
 
     lo, hi = data.priors.log_sigma
     grid = np.linspace(lo, hi, n)
@@ -208,3 +207,36 @@ def test_draw_log_sigma_follows_its_conditional():
         cdf /= cdf[-1]
         p = stats.kstest(draws[f], lambda x, c=cdf: np.interp(x, grid, c)).pvalue
         assert p > 0.01, (f, p)
+
+
+def test_log_gamma_interval_in_every_tail_regime():
+    # log of int_lo^hi t^(k-1) e^-t dt / Gamma(k) against adaptive quadrature of
+    # the integrand scaled by its largest value on the interval (no underflow):
+    # intervals cutting neither tail, the lower one (sigma at its upper bound),
+    # the upper one (sigma at its lower bound) and both (narrow, far in either
+    # tail, where P and Q both underflow or round to 1), mixed in one call as
+    # the sampler's batches mix them; quad's relative accuracy is ~1e-10, and
+    # the tails dropped (< 1e-10) are far below that relative to these intervals
+    k = np.array([[2.0], [7.5], [9.5], [40.0]])
+    pairs = [(1e-30, 1e6), (3.0, 1e6), (1e-30, 0.5), (0.2, 0.3), (60.0, 62.0), (8.0, 12.0)]
+    pairs += [(1e-6, 2e-6), (30.0, 1e3)]  # wholly below, wholly above the mode
+    x_lo = np.array([[lo for lo, _ in pairs]] * len(k))
+    x_hi = np.array([[hi for _, hi in pairs]] * len(k))
+    got = lk._log_gamma_interval(k, x_lo, x_hi)
+    for i, kk in enumerate(k[:, 0]):
+        for j, (lo, hi) in enumerate(pairs):
+
+            def log_f(t, kk=kk):
+                return (kk - 1.0) * np.log(t) - t - special.gammaln(kk)
+
+            top = log_f(np.clip(kk - 1.0, lo, hi))  # the integrand's largest value
+            val, _ = integrate.quad(
+                lambda t, top=top, log_f=log_f: np.exp(log_f(t) - top),
+                lo,
+                min(hi, 1e4),
+                epsabs=0,
+                epsrel=1e-11,
+                limit=200,
+                points=[np.clip(kk - 1.0, lo, min(hi, 1e4))],
+            )
+            np.testing.assert_allclose(got[i, j], np.log(val) + top, rtol=1e-8, atol=1e-8)

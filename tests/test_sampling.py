@@ -27,6 +27,24 @@ def test_integrated_time_of_ar1_processes():
     np.testing.assert_allclose(tau, ref, rtol=0.05)
 
 
+def test_integrated_time_of_a_narrow_float32_chain():
+    # a posterior far narrower than its value (log s = 11.7, sd 4e-5, as for a
+    # facet with 0.01 % noise) stored in float32: the estimate must equal the
+    # float64 one (a float32 mean errs by more than the spread and gave tau ~ 2000
+    # for this chain of tau 14); float32 rounding (ulp 1e-6 = sd / 40) adds a
+    # little white noise, well under 1 %
+    rng = np.random.default_rng(1)
+    n, w, phi = 2000, 24, 0.88
+    x = np.zeros((n, 1, w, 1))
+    e = rng.standard_normal(x.shape)
+    for t in range(1, n):
+        x[t] = phi * x[t - 1] + np.sqrt(1 - phi**2) * e[t]
+    chain = 11.727 + 4e-5 * x
+    want = sampling.integrated_time(chain)
+    np.testing.assert_allclose(sampling.integrated_time(chain.astype(np.float32)), want, rtol=0.01)
+    assert 8 < want[0, 0] < 25  # (1 + phi) / (1 - phi) = 15.7
+
+
 @pytest.mark.parametrize("moves", [(("stretch", 1.0),), sampling.DEFAULT_MOVES])
 def test_batched_sampler_recovers_correlated_gaussians(moves):
     # 50 independent problems, each a 3-d Gaussian with its own mean and covariance
