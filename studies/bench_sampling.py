@@ -14,7 +14,7 @@ Facet sets (``--facets-from``):
 Both samplers run the protocol of :func:`bayesgloss.sampling.sample_posterior`
 with its defaults: sigma integrated out, ridge coordinates for low-noise
 facets, 4 independent ensembles of 2 P walkers, the same move mix (stretch,
-DE, DE with gamma 1, and the jumps in log n as an emcee ``MHMove``), burn-in of
+DE, DE with gamma 1, and the independence jumps as an emcee ``MHMove``), burn-in of
 at least 5 integrated autocorrelation times, production until the pooled
 autocorrelation time says 50 tau and ArviZ finds gamma converged (R-hat <
 1.01, bulk and tail ESS >= 400), at most 8000 steps. Stock emcee runs each
@@ -128,18 +128,18 @@ def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
     coords = sampling.RidgeCoordinates.of(data)
     log_prob = coords.log_prob(density, data)
     rng = np.random.default_rng(seed)
-    jump = sampling.ExponentJump.of(data, marginal).take([0], coords.active)
+    jump = sampling.ExponentJump.of(data, marginal, ridge=coords).take([0], coords.active)
+    ridge = bool(coords.active[0])
 
-    def exponent_jump(x, random):  # the n-jump move as an emcee Metropolis-Hastings move
-        y, factor = jump.propose(x[None], random)
+    def exponent_jump(x, random):  # the jumps as an emcee Metropolis-Hastings move
+        y, factor = jump.propose(x[None], random, fresh=ridge)
         return y[0], factor[0]
 
-    moves = [  # sampling.FACET_MOVES
-        (emcee.moves.StretchMove(), 0.2),
-        (emcee.moves.DEMove(), 0.6),
-        (emcee.moves.DEMove(gamma0=1.0), 0.1),
-        (emcee.moves.MHMove(exponent_jump), 0.1),
-    ]
+    if ridge:  # sampling.FACET_MOVES in ridge coordinates
+        mix = [(emcee.moves.DEMove(), 0.4), (emcee.moves.MHMove(exponent_jump), 0.3)]
+    else:  # ... and in plain ones (sampling.PLAIN_JUMP)
+        mix = [(emcee.moves.DEMove(), 0.6), (emcee.moves.MHMove(exponent_jump), 0.1)]
+    moves = [(emcee.moves.StretchMove(), 0.2), (emcee.moves.DEMove(gamma0=1.0), 0.1), *mix]
     samplers = []
     for k in range(e):
         start = coords.from_theta(sampling.initial_ensemble(data, w, rng)[..., :p])[0]
@@ -148,7 +148,7 @@ def stock_emcee_facet(data: lk.CurveData, seed: int) -> tuple[bool, int]:
         s.run_mcmc(start, pr["burn"])
         s.reset()
         samplers.append(s)
-    steps, next_check = 0, max(pr["chunk"], 10 * pr["tau_multiple"])
+    steps, next_check = 0, max(pr["chunk"], sampling.FIRST_CHECK_TAUS * pr["tau_multiple"])
     while True:
         for s in samplers:
             s.run_mcmc(None, pr["chunk"])
