@@ -441,8 +441,9 @@ class RidgeCoordinates:
     (d(gamma, log s) / d(a, b) has determinant -1 / s^2). Further
     coordinates (log sigma, log g) pass through unchanged. Facets whose best
     fit leaves a relative rms above ``max_rms`` (prior-dominated, broad
-    posteriors) keep the plain coordinates x = theta; so do curves with a
-    non-linear camera.
+    posteriors) keep the plain coordinates x = theta; so do curves whose
+    best fit is zero (noise above the signal: the rms of a zero curve says
+    nothing of the noise) and curves with a non-linear camera.
 
     Attributes
     ----------
@@ -473,8 +474,8 @@ class RidgeCoordinates:
         yd, yg = np.sum(w * y * d, -1), np.sum(w * y * g, -1)
         best = np.argmin(rms, axis=1)[:, None]
         r2 = np.maximum(np.take_along_axis(rms, best, 1) ** 2, 1e-24)  # (B, 1)
-        s0 = np.take_along_axis(a + b, best, 1)
-        s0 = np.where(s0 > 0, s0, np.exp(data.log_s_center)[:, None])
+        s_fit = np.take_along_axis(a + b, best, 1)
+        s0 = np.where(s_fit > 0, s_fit, np.exp(data.log_s_center)[:, None])
         i11, i22, i12 = dd / r2 + s0**-2, gg / r2 + s0**-2, dg / r2
         det = i11 * i22 - i12 * i12
         c11, c22, c12 = i22 / det, i11 / det, -i12 / det  # covariance of (a, b)
@@ -485,6 +486,7 @@ class RidgeCoordinates:
         factor = np.stack([l11, l21, l22], axis=-1)
         active = (
             (np.sqrt(r2[:, 0]) < max_rms)
+            & (s_fit[:, 0] > 0)  # a curve the fit explains by nothing has no ridge
             & np.all(np.isfinite(center), axis=(1, 2))
             & np.all(np.isfinite(factor) & (factor[..., [0, 2]] > 0).all(-1)[..., None], (1, 2))
         )
