@@ -680,33 +680,36 @@ class ExponentJump:
         the facets it samples in ridge coordinates)."""
         lo0, hi0 = data.priors.log_n
         b = len(data.y)
-        edges = np.tile([lo0, hi0], (b, 1))
-        for refine in (False, True):
+
+        def on_cells(edges):
+            """Cell width, relative posterior density (B, M), fits and Q at the
+            centres of M cells between each row's edges."""
             width = (edges[:, 1] - edges[:, 0]) / cells
             centres = edges[:, :1] + width[:, None] * (np.arange(cells) + 0.5)
             parts = [
-                _profile_log_posterior(data.take(np.arange(i, i + block)[: b - i]), c, marginal)
+                _profile_log_posterior(data.take(np.arange(i, min(i + block, b))), c, marginal)
                 for i, c in ((i, centres[i : i + block]) for i in range(0, b, block))
             ]
             log_post = np.concatenate([lp for (lp, _), _ in parts])
             fit = np.concatenate([th for _, th in parts])
-            if ridge is not None:
+            q = np.concatenate([q for (_, q), _ in parts]) if marginal else None
+            if ridge is not None:  # the Laplace volume of (gamma, log s) at each n
                 v = ridge._at(centres)
                 with np.errstate(invalid="ignore", divide="ignore"):
                     volume = np.log(v[2] * v[4]) - 2.0 * fit[..., 2]
                 log_post = np.where(ridge.active[:, None], log_post + volume, log_post)
             with np.errstate(invalid="ignore"):
-                top = np.max(log_post, axis=1, keepdims=True)
-                w = np.exp(log_post - top)
-            w = np.where(np.isfinite(w), w, 0.0)
-            if refine:
-                break
-            keep = w > np.exp(-25.0)
-            first = np.where(keep.any(1), np.argmax(keep, 1) - 1, 0)
-            last = np.where(keep.any(1), cells - np.argmax(keep[:, ::-1], 1) + 1, cells)
-            edges = lo0 + width[:, None] * np.stack(
-                [np.maximum(first, 0), np.minimum(last, cells)], 1
-            )
+                w = np.exp(log_post - np.max(log_post, axis=1, keepdims=True))
+            return width, np.where(np.isfinite(w), w, 0.0), fit, q
+
+        # the prior range first, then the cells above e^-25 of the peak and one each side
+        width, w, _, _ = on_cells(np.tile([lo0, hi0], (b, 1)))
+        keep = w > np.exp(-25.0)
+        first = np.where(keep.any(1), np.argmax(keep, 1) - 1, 0)
+        last = np.where(keep.any(1), cells - np.argmax(keep[:, ::-1], 1) + 1, cells)
+        span = np.stack([np.maximum(first, 0), np.minimum(last, cells)], 1)
+        edges = lo0 + width[:, None] * span
+        width, w, fit, q = on_cells(edges)
         tot = w.sum(axis=1, keepdims=True)
         w = np.where(tot > 0, w / np.where(tot > 0, tot, 1.0), 1.0 / cells)
         cdf = np.cumsum(w, axis=1)
@@ -722,7 +725,7 @@ class ExponentJump:
             # node grid's interpolation error inflates
             with np.errstate(invalid="ignore", divide="ignore"):
                 ridge_fit = ridge.from_theta(fit[..., :3])
-                q_min = np.min(np.concatenate([q for (_, q), _ in parts]), axis=1)
+                q_min = np.min(q, axis=1)
                 n_valid = np.maximum(data.valid.sum(1), 1)
                 spread = np.sqrt(q_min / n_valid) / ridge.rms
             ok = np.all(np.isfinite(ridge_fit), axis=(1, 2)) & np.isfinite(spread) & (spread > 0)
