@@ -20,7 +20,9 @@ Noise (``noise=``): ``"relative"`` (default) sd = sigma (m_ft + floor_f);
 ``"gaussian"`` sd = sigma; ``"student"`` relative scale with 4 degrees of
 freedom (heavier tails), where m is the noiseless prediction on the observed
 scale and floor_f = 1 % of s_f max_t D_ft, the peak of the facet's diffuse
-radiance at the current scale (so that dark frames do not get zero noise).
+radiance at the current scale (so that dark frames do not get zero noise),
+on the observed scale: for ``camera="power"`` 1 % of (s_f max_t D_ft)^(1/g),
+a code value as m is.
 Frames flagged invalid by the reader are left out.
 
 Parameters, per facet: ``gamma`` in [0, 1] (fraction of reflected energy in
@@ -274,13 +276,22 @@ def curve_data(
     )
 
 
+def _noise_floor(theta, data: CurveData) -> np.ndarray:
+    """floor_f on the observed scale, (B, K, 1): FLOOR_FRACTION of the facet's
+    peak diffuse value s max_t D_ft, through the response for ``"power"``
+    (a code value, as m is), > 0."""
+    peak = data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])
+    if data.camera == "power":
+        peak = peak ** np.exp(-theta[..., 4:5])
+    return np.maximum(FLOOR_FRACTION * peak, 1e-300)
+
+
 def _noise_sd(m, theta, data: CurveData) -> np.ndarray:
     """Noise standard deviation on the observed scale (module docstring)."""
     sigma = np.exp(theta[..., 3:4])
     if data.noise == "gaussian":
         return sigma * np.ones_like(m)
-    floor = FLOOR_FRACTION * data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])
-    return sigma * (np.abs(m) + np.maximum(floor, 1e-300))
+    return sigma * (np.abs(m) + _noise_floor(theta, data))
 
 
 def log_prior(theta, data: CurveData) -> np.ndarray:
@@ -657,8 +668,7 @@ def log_likelihood(theta, data: CurveData, pointwise: bool = False) -> np.ndarra
         z = (data.y[:, None, :] - m) * np.exp(-log_sigma)
         log_sd = np.broadcast_to(log_sigma, m.shape)
     else:
-        floor = FLOOR_FRACTION * data.diffuse_peak[:, None, None] * np.exp(th[..., 2:3])
-        scale = np.abs(m) + np.maximum(floor, 1e-300)
+        scale = np.abs(m) + _noise_floor(th, data)
         z = (data.y[:, None, :] - m) / scale * np.exp(-log_sigma)
         log_sd = np.log(scale) + log_sigma
     if data.noise == "student":

@@ -240,3 +240,25 @@ def test_log_gamma_interval_in_every_tail_regime():
                 points=[np.clip(kk - 1.0, lo, min(hi, 1e4))],
             )
             np.testing.assert_allclose(got[i, j], np.log(val) + top, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("log_g", [0.0, np.log(2.2)])
+def test_noise_floor_is_one_percent_of_the_peak_on_the_observed_scale(log_g):
+    # a dark frame (D = G = 0, so m = 0) observed exactly: its pointwise log
+    # likelihood is -log(sigma floor) - log(2 pi) / 2, so it reveals the floor,
+    # which must be 1 % of the facet's peak diffuse value on the observed scale,
+    # (s max D)^(1/g) for the power camera; a floor left in linear units
+    # (0.01 s max D added to code values) is off by (s max D)^(1 - 1/g) = 8x here
+    rng = np.random.default_rng(21)
+    b = _bases(rng, f=2, t=6)
+    b.diffuse[:, 0] = 0.0
+    b.glossy[:, :, 0] = 0.0
+    theta = _theta(rng, 2, 1, p=5)
+    theta[..., 2] = np.log(100.0 / b.diffuse.max(axis=1))[:, None]  # s max D = 100
+    theta[..., 4] = log_g
+    design = lk.curve_data(np.ones((2, 6)), np.ones((2, 6), bool), b, camera="power")
+    y = lk.predict(theta, design)[:, 0]
+    data = lk.curve_data(y, np.ones((2, 6), bool), b, camera="power")
+    ll = lk.log_likelihood(theta, data, pointwise=True)[:, 0, 0]
+    floor = np.exp(-ll - 0.5 * np.log(2 * np.pi) - theta[:, 0, 3])
+    np.testing.assert_allclose(floor, 0.01 * 100.0 ** np.exp(-log_g), rtol=1e-9)
