@@ -30,7 +30,31 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-__all__ = ["executor", "unit_key", "run_units", "script_unit", "estimate_unit"]
+__all__ = ["executor", "process_pool", "unit_key", "run_units", "script_unit", "estimate_unit"]
+
+
+def process_pool(jobs: int) -> ProcessPoolExecutor:
+    """``jobs`` local worker processes that end when the process that started
+    them dies: on Linux each worker asks the kernel for SIGTERM on its
+    parent's death (``prctl(PR_SET_PDEATHSIG)``), so a run killed with
+    ``kill -9`` leaves no workers computing on (Ctrl-C already reaches the
+    whole process group)."""
+    return ProcessPoolExecutor(
+        max_workers=max(1, jobs), initializer=_end_with_parent, initargs=(os.getpid(),)
+    )
+
+
+def _end_with_parent(parent: int) -> None:
+    """Worker initializer of :func:`process_pool`."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    pr_set_pdeathsig = 1
+    ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
 
 
 @contextlib.contextmanager
@@ -46,7 +70,7 @@ def executor(jobs: int = 2, scheduler: str | None = None):
         ``distributed.LocalCluster``/``Client`` object.
     """
     if scheduler is None:
-        with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+        with process_pool(jobs) as pool:
             yield pool
         return
     try:

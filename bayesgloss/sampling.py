@@ -993,9 +993,11 @@ def sample_posterior(
     parts = [None] * n_streams
     done = 0
     if jobs > 1 and n_streams > 1:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        from .runner import process_pool
+
+        with process_pool(jobs) as pool:
             futs = {pool.submit(_sample_stream, d, sd, **args): i for i, d, sd in tasks}
             for fut in as_completed(futs):
                 parts[futs[fut]] = fut.result()

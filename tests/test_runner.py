@@ -147,3 +147,39 @@ def test_script_unit_on_a_dask_cluster(tmp_path):
         )
     value, pid = json.loads((folder / "out.json").read_text())
     assert value == 10 and pid != os.getpid()
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process exists and is not a zombie (Linux /proc)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_workers_end_when_their_parent_is_killed():
+    # a parent with two busy workers is SIGKILLed alone (not its process group):
+    # the workers must end within seconds instead of computing on as orphans
+    script = (
+        "import os, sys, time\n"
+        "from bayesgloss import runner\n"
+        "pool = runner.process_pool(2)\n"
+        "pids = set()\n"
+        "while len(pids) < 2:\n"
+        "    pids |= {f.result() for f in [pool.submit(os.getpid) for _ in range(8)]}\n"
+        "for _ in range(2): pool.submit(time.sleep, 120)\n"
+        "print(*pids, flush=True)\n"
+        "time.sleep(120)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    with proc.stdout:
+        pids = [int(p) for p in proc.stdout.readline().split()]
+    assert len(pids) == 2 and all(_alive(p) for p in pids)
+    proc.kill()  # the parent only
+    proc.wait()
+    deadline = time.time() + 20
+    while time.time() < deadline and any(_alive(p) for p in pids):
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in pids)
