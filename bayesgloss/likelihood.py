@@ -280,10 +280,13 @@ def _noise_floor(theta, data: CurveData) -> np.ndarray:
     """floor_f on the observed scale, (B, K, 1): FLOOR_FRACTION of the facet's
     peak diffuse value s max_t D_ft, through the response for ``"power"``
     (a code value, as m is), > 0."""
-    peak = data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])
     if data.camera == "power":
-        peak = peak ** np.exp(-theta[..., 4:5])
-    return np.maximum(FLOOR_FRACTION * peak, 1e-300)
+        peak = (data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])) ** np.exp(
+            -theta[..., 4:5]
+        )
+        return np.maximum(FLOOR_FRACTION * peak, 1e-300)
+    floor = FLOOR_FRACTION * data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])
+    return np.maximum(floor, 1e-300)
 
 
 def _noise_sd(m, theta, data: CurveData) -> np.ndarray:
