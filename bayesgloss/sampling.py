@@ -648,10 +648,18 @@ class ExponentJump:
     cdf : ndarray (B, M)
         Cumulative cell probabilities q_m (last exactly 1).
     fit : ndarray (B, M, P)
-        c_m in plain coordinates (the log n column unused).
+        c_m in each row's sampling coordinates (the log n column unused):
+        plain ones from :meth:`of`; :meth:`take` puts ``ridge_fit`` in the
+        rows it marks as ridge coordinates.
     column : ndarray (B,) of int
         The sampling coordinate that holds log n (0 in ridge coordinates,
         1 in plain ones).
+    ridge_fit : ndarray (B, M, 3) or None
+        c_m in ridge coordinates, (log n, u1, u2) (from :meth:`of` with
+        ``ridge``; None after :meth:`take`).
+    spread : ndarray (B,) or None
+        Scale of the fresh ridge offsets: the noise (rms) at the best fine
+        cell over the best node's, at most 1 (None: 1).
     """
 
     bounds: tuple
