@@ -280,12 +280,11 @@ def _noise_floor(theta, data: CurveData) -> np.ndarray:
     """floor_f on the observed scale, (B, K, 1): FLOOR_FRACTION of the facet's
     peak diffuse value s max_t D_ft, through the response for ``"power"``
     (a code value, as m is), > 0."""
+    peak = data.diffuse_peak[:, None, None]
     if data.camera == "power":
-        peak = (data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])) ** np.exp(
-            -theta[..., 4:5]
-        )
-        return np.maximum(FLOOR_FRACTION * peak, 1e-300)
-    floor = FLOOR_FRACTION * data.diffuse_peak[:, None, None] * np.exp(theta[..., 2:3])
+        floor = FLOOR_FRACTION * (peak * np.exp(theta[..., 2:3])) ** np.exp(-theta[..., 4:5])
+    else:  # in this order, as the simulated data of the committed studies were made
+        floor = FLOOR_FRACTION * peak * np.exp(theta[..., 2:3])
     return np.maximum(floor, 1e-300)
 
 
@@ -513,7 +512,7 @@ def _log_gamma_interval(k, x_lo, x_hi, cuts=None):
         part[one] = _log_lower_gamma(kk[one], hi[one])  # log P(k, x_hi)
     both = c_lo & c_hi
     if both.any():  # difference the tails on the interval's side of the mode
-        up, down = both & (lo > kk), both & ~(lo > kk)
+        up, down = both & above, both & ~above
         with np.errstate(divide="ignore", invalid="ignore"):
             if up.any():
                 lq_lo, lq_hi = _log_upper_gamma(kk[up], lo[up]), _log_upper_gamma(kk[up], hi[up])

@@ -416,7 +416,7 @@ def _reflect(x, lo: float, hi: float):
 
 RIDGE_MAX_RMS = 1.0
 #: The first convergence check comes after this many times ``min_tau_multiple``
-#: steps (no facet posterior here mixes in under 5 steps).
+#: steps (facets in ridge coordinates mix in about 5.5 steps, the others slower).
 FIRST_CHECK_TAUS = 5.0
 
 
@@ -688,6 +688,7 @@ class ExponentJump:
         the facets it samples in ridge coordinates)."""
         lo0, hi0 = data.priors.log_n
         b = len(data.y)
+        w_nodes = _node_fits(data, weights=True)[3]  # the fits' weights, once for both passes
 
         def on_cells(edges):
             """Cell width, relative posterior density (B, M), fits and Q at the
@@ -695,7 +696,9 @@ class ExponentJump:
             width = (edges[:, 1] - edges[:, 0]) / cells
             centres = edges[:, :1] + width[:, None] * (np.arange(cells) + 0.5)
             parts = [
-                _profile_log_posterior(data.take(np.arange(i, min(i + block, b))), c, marginal)
+                _profile_log_posterior(
+                    data.take(np.arange(i, min(i + block, b))), c, marginal, w_nodes[i : i + block]
+                )
                 for i, c in ((i, centres[i : i + block]) for i in range(0, b, block))
             ]
             log_post = np.concatenate([lp for (lp, _), _ in parts])
@@ -803,7 +806,8 @@ class ExponentJump:
         log_q_new, cell_new = self._log_density(new)
         factor = log_q_old - log_q_new
         fit = self.fit.reshape(b * m, -1)[:, :p]
-        moved = s + np.take(fit, cell_new, 0) - np.take(fit, cell_old, 0)
+        fit_old, fit_new = np.take(fit, cell_old, 0), np.take(fit, cell_new, 0)
+        moved = s + fit_new - fit_old
         out = np.where((self.column[:, None, None] == np.arange(p)), new[..., None], moved)
         if fresh:  # ridge offsets from a bivariate t about the fit, in ridge rows
             ridge = (self.column == 0)[:, None]
@@ -813,23 +817,23 @@ class ExponentJump:
             def log_t(v):
                 return -0.5 * (nu + 2.0) * np.log1p(np.sum(v * v, -1) / nu)
 
-            t_old = (s[..., 1:3] - np.take(fit, cell_old, 0)[..., 1:3]) / scale
+            t_old = (s[..., 1:3] - fit_old[..., 1:3]) / scale
             factor += np.where(ridge, log_t(t_old) - log_t(t), 0.0)
-            fresh_u = np.take(fit, cell_new, 0)[..., 1:3] + scale * t
+            fresh_u = fit_new[..., 1:3] + scale * t
             out[..., 1:3] = np.where(ridge[..., None], fresh_u, out[..., 1:3])
         return out, factor
 
 
-def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool):
+def _profile_log_posterior(data: lk.CurveData, log_n, marginal: bool, w_nodes):
     """Log posterior density at each log n (B, M), with gamma and s (and sigma)
     at their weighted least-squares values there, and those values (B, M, P)
-    (see :class:`ExponentJump`); ``log_n`` (M,) or one row per facet (B, M)."""
+    (see :class:`ExponentJump`); ``log_n`` (M,) or one row per facet (B, M);
+    ``w_nodes`` the weights of :func:`_node_fits` (B, N, T)."""
     log_n = np.broadcast_to(log_n, (len(data.y), np.shape(log_n)[-1]))
     j, frac = lk.grid_position(log_n, data.log_n_grid)
     rows = np.arange(len(data.y))[:, None]
     g = data.glossy[rows, j] + frac[..., None] * (data.glossy[rows, j + 1] - data.glossy[rows, j])
-    _, _, _, w = _node_fits(data, weights=True)
-    w = w[rows, np.rint(j + frac).astype(np.intp)]  # weights of the nearest node
+    w = w_nodes[rows, np.rint(j + frac).astype(np.intp)]  # weights of the nearest node
     y, d = data.y[:, None, :], data.diffuse[:, None, :]
     y = np.maximum(y, 0.0) if data.camera == "power" else y
     a, b = _nonnegative_pair(y, d, g, w)
