@@ -28,6 +28,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ._thirdparty import arviz
+
 __all__ = ["main"]
 
 
@@ -227,6 +229,7 @@ def _estimate(args: argparse.Namespace) -> int:
         seed=args.seed,
         jobs=args.jobs,
         progress=progress,
+        sampler_options={"max_steps": args.max_steps},
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -270,7 +273,7 @@ def _estimate_many(args, progress) -> int:
     import json
 
     from . import bundle as bundle_io
-    from . import runner
+    from . import estimate, runner
 
     if not args.out:
         raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
@@ -285,12 +288,13 @@ def _estimate_many(args, progress) -> int:
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
+                "max_steps": args.max_steps,
             },
         )
         for b in args.bundle
     ]
     folders = runner.run_units(
-        runner.estimate_unit,
+        estimate.estimate_unit,
         units,
         args.out,
         jobs=args.jobs,
@@ -337,8 +341,6 @@ def _report(args: argparse.Namespace) -> int:
     """The one-page posterior report of a saved estimate (``estimate --out``)."""
     import json
 
-    import arviz as az
-
     from . import baseline, estimate, report
     from . import bundle as bundle_io
 
@@ -351,7 +353,7 @@ def _report(args: argparse.Namespace) -> int:
             )
     summary = json.loads(summary_path.read_text())
     b = bundle_io.read_bundle(args.bundle or summary["bundle"])
-    idata = az.from_netcdf(str(nc_path))
+    idata = arviz().from_netcdf(str(nc_path))
     comparison = (
         (result / "comparison.txt").read_text() if (result / "comparison.txt").exists() else None
     )
@@ -367,6 +369,8 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import sky
+
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     d = sub.add_parser("demo", help="the main job on the built-in default sequence")
@@ -406,9 +410,11 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--sky",
         default="gensky-clear",
-        help="illumination model (default: "
-        "gensky-clear; also point-sun, gensky-intermediate, gensky-overcast, "
-        "cie-1..cie-15, perez)",
+        choices=sky.sky_models(),
+        metavar="SKY",
+        help="illumination model (default: gensky-clear; one of "
+        + ", ".join(sky.sky_models())
+        + ")",
     )
     es.add_argument("--camera", default="auto", choices=["auto", "linear", "power"])
     es.add_argument("--noise", default="relative", choices=["relative", "gaussian", "student"])
@@ -439,7 +445,8 @@ def _parser() -> argparse.ArgumentParser:
     cm.add_argument(
         "--skies",
         default="gensky-clear,gensky-intermediate",
-        help="comma-separated illumination models (default: gensky-clear,gensky-intermediate)",
+        help="comma-separated illumination models (default: gensky-clear,gensky-intermediate; "
+        "any of " + ", ".join(sky.sky_models()) + ")",
     )
     cm.add_argument(
         "--models",

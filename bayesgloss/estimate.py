@@ -25,23 +25,40 @@ Object-level gloss, beside the paper's average of facets:
 - ``mean``: the mean over facets of their posterior medians (the paper's
   average, for comparison).
 
-Illumination models (``illumination=``): ``"point-sun"`` (the paper's: sun
-only, no sky), ``"gensky-clear"``, ``"gensky-intermediate"``,
-``"gensky-overcast"``, ``"cie-1"`` ... ``"cie-15"``, ``"perez"``.
+Illumination models (``illumination=``, :data:`ILLUMINATION_MODELS`): the
+sky models of :func:`bayesgloss.sky.sky_models` (``"point-sun"``, the
+paper's sun with no sky; gensky's clear, intermediate, overcast and uniform
+skies; the 15 CIE general skies; Perez).
+
+A facet needs at least :data:`MIN_FRAMES` usable frames; a bundle in which
+no facet has them (every frame at night, a single frame) is rejected with
+:class:`NoUsableData`, which says how many frames have the sun up.
+
+:func:`estimate_unit` is one bundle's estimate as files, the unit of work
+that :func:`bayesgloss.runner.run_units` fans out over many bundles.
 """
 
 from __future__ import annotations
 
+import json
+import tempfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from . import bundle as bundle_io
+from . import diagnostics, render, sampling, sky
 from . import likelihood as lk
-from . import render, sampling, sky
+from ._thirdparty import arviz
+from .pool import process_pool
 
 __all__ = [
     "ILLUMINATION_MODELS",
+    "MIN_FRAMES",
+    "NoUsableData",
+    "usable_facets",
+    "estimate_unit",
     "bundle_bases",
     "observations",
     "EstimateResult",
@@ -52,15 +69,14 @@ __all__ = [
     "shared_gloss",
 ]
 
-ILLUMINATION_MODELS = (
-    "point-sun",
-    "gensky-clear",
-    "gensky-intermediate",
-    "gensky-overcast",
-    "perez",
-) + tuple(f"cie-{k}" for k in range(1, 16))
-RHAT_MAX = 1.01
-ESS_MIN = 400
+#: Illumination models: every sky model of :func:`bayesgloss.sky.sky_models`.
+ILLUMINATION_MODELS = sky.sky_models()
+#: Usable frames a facet's curve needs at least.
+MIN_FRAMES = 4
+
+
+class NoUsableData(ValueError):
+    """No facet of a bundle has enough usable frames to estimate its gloss."""
 
 
 def bundle_bases(
@@ -100,6 +116,32 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.where(usable, y, 0.0), usable, censored
 
 
+def usable_facets(b, usable, min_frames: int = MIN_FRAMES) -> np.ndarray:
+    """Facets with at least ``min_frames`` usable frames, (F,) of bool.
+
+    Parameters
+    ----------
+    b : bundle.Bundle
+    usable : ndarray (F, T) of bool
+        Usable entries of the facet curves (:func:`observations`).
+    min_frames : int
+
+    Raises
+    ------
+    NoUsableData
+        Where no facet has them, saying how many frames have the sun up.
+    """
+    keep = usable.sum(axis=1) >= min_frames
+    if not np.any(keep):
+        n_up, n_t = int(np.sum(b.sun_up)), len(b.sun_up)
+        best = int(usable.sum(axis=1).max()) if usable.size else 0
+        raise NoUsableData(
+            f"bundle '{b.path}': no facet has enough usable frames: {n_up} of {n_t} "
+            f"frames have the sun up, the best facet has {best} usable, {min_frames} needed"
+        )
+    return keep
+
+
 @dataclass
 class EstimateResult:
     """What :func:`estimate_bundle` found."""
@@ -110,14 +152,11 @@ class EstimateResult:
 
 
 def convergence(idata) -> dict:
-    """R-hat and bulk/tail ESS of gamma per facet, and whether each converged."""
-    import arviz as az
-
-    post = idata.posterior[["gamma"]]
-    rhat = az.rhat(post)["gamma"].values
-    ess_bulk = az.ess(post, method="bulk")["gamma"].values
-    ess_tail = az.ess(post, method="tail")["gamma"].values
-    ok = (rhat < RHAT_MAX) & (ess_bulk >= ESS_MIN) & (ess_tail >= ESS_MIN)
+    """R-hat and bulk/tail ESS of gamma per facet, and whether each converged
+    (the rule of :mod:`bayesgloss.diagnostics`)."""
+    gamma = np.moveaxis(idata.posterior["gamma"].values, -1, 0)  # (F, E, S)
+    rhat, ess_bulk, ess_tail = diagnostics.rank_diagnostics(gamma)
+    ok = diagnostics.converged(gamma)
     return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail, "converged": ok}
 
 
@@ -125,7 +164,7 @@ def to_inference_data(
     samples: sampling.PosteriorSamples, data: lk.CurveData, ids, *, times=None, rng=None
 ):
     """ArviZ InferenceData of facet posteriors (chains are independent ensembles)."""
-    import arviz as az
+    az = arviz()
 
     rng = np.random.default_rng(rng)
     draws = samples.draws  # (F, E, S, P)
@@ -300,7 +339,7 @@ def _quantiles(x) -> dict:
     For a gamma at the edge of [0, 1] the equal-tailed interval cannot hold
     the edge; the highest-density interval can.
     """
-    import arviz as az
+    az = arviz()
 
     x = np.asarray(x, float).ravel()
     q = np.quantile(x, [0.05, 0.5, 0.95])
@@ -335,25 +374,36 @@ def estimate_bundle(
     camera : {"auto", "linear", "power"}
         ``"auto"``: ``"power"`` for an ``unknown`` pixel encoding, else
         ``"linear"`` (the reader undoes known responses).
-    seed, jobs, progress
+    seed, progress
         See :func:`bayesgloss.sampling.sample_posterior`.
+    jobs : int
+        Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
-        More keyword arguments for it.
+        More keyword arguments for :func:`~bayesgloss.sampling.sample_posterior`
+        (``max_steps``...).
+
+    Raises
+    ------
+    NoUsableData
+        Where no facet has :data:`MIN_FRAMES` usable frames.
     """
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
     curves = bundle_io.facet_curves(b)
     if camera == "auto":
         camera = "linear" if b.response_known else "power"
     y, usable, censored = observations(curves)
-    keep = usable.sum(axis=1) >= 4  # a curve needs a few frames
+    keep = usable_facets(b, usable)
     bases = bundle_bases(b, illumination)
     sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
     data = lk.curve_data(
         y[keep], usable[keep], sub, censored=censored[keep], noise=noise, camera=camera
     )
-    samples = sampling.sample_posterior(
-        data, seed=seed, jobs=jobs, progress=progress, **(sampler_options or {})
-    )
+    options = dict(seed=seed, progress=progress, **(sampler_options or {}))
+    if jobs > 1:
+        with process_pool(jobs) as pool:
+            samples = sampling.sample_posterior(data, pool=pool, **options)
+    else:
+        samples = sampling.sample_posterior(data, **options)
     ids = curves.ids[keep]
     idata = to_inference_data(samples, data, ids, times=b.times, rng=seed)
     diag = convergence(idata)
@@ -405,3 +455,34 @@ def estimate_bundle(
         "sampler": {"seconds": samples.seconds, "median_steps": float(np.median(samples.n_steps))},
     }
     return EstimateResult(idata, summary, samples)
+
+
+def estimate_unit(
+    bundle: str,
+    illumination: str = "gensky-clear",
+    noise: str = "relative",
+    camera: str = "auto",
+    seed: int = 0,
+    max_steps: int = 8000,
+) -> dict[str, bytes]:
+    """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
+
+    The unit of work of :func:`bayesgloss.runner.run_units` over many
+    bundles; it runs in one process (parallelism is across units), so the
+    result is the same whatever executor runs it.
+    """
+    res = estimate_bundle(
+        bundle,
+        illumination=illumination,
+        noise=noise,
+        camera=camera,
+        seed=seed,
+        jobs=1,
+        sampler_options={"max_steps": max_steps},
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        nc = Path(tmp) / "posterior.nc"
+        res.idata.to_netcdf(str(nc))
+        data = nc.read_bytes()
+    summary = {**res.summary, "bundle": str(bundle)}
+    return {"summary.json": json.dumps(summary, indent=2).encode(), "posterior.nc": data}

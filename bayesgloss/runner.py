@@ -8,7 +8,7 @@ complete, so a run killed at any moment leaves only finished units behind,
 and a rerun skips them: nothing finished is recomputed, nothing is lost.
 
 Executors (:func:`executor`): ``jobs`` local processes
-(:class:`concurrent.futures.ProcessPoolExecutor`), or, given a scheduler
+(:func:`bayesgloss.pool.process_pool`), or, given a scheduler
 address, a Dask distributed cluster through ``Client.get_executor()``
 (the ``cluster`` extra: ``pip install bayesgloss[cluster]``). Units defined
 in a script rather than in the package (the studies) run through
@@ -27,34 +27,12 @@ import shutil
 import sys
 import tempfile
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from pathlib import Path
 
-__all__ = ["executor", "process_pool", "unit_key", "run_units", "script_unit", "estimate_unit"]
+from .pool import process_pool
 
-
-def process_pool(jobs: int) -> ProcessPoolExecutor:
-    """``jobs`` local worker processes that end when the process that started
-    them dies: on Linux each worker asks the kernel for SIGTERM on its
-    parent's death (``prctl(PR_SET_PDEATHSIG)``), so a run killed with
-    ``kill -9`` leaves no workers computing on (Ctrl-C already reaches the
-    whole process group)."""
-    return ProcessPoolExecutor(
-        max_workers=max(1, jobs), initializer=_end_with_parent, initargs=(os.getpid(),)
-    )
-
-
-def _end_with_parent(parent: int) -> None:
-    """Worker initializer of :func:`process_pool`."""
-    if not sys.platform.startswith("linux"):
-        return
-    import ctypes
-    import signal
-
-    pr_set_pdeathsig = 1
-    ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
-    if os.getppid() != parent:  # the parent died before the request took effect
-        os._exit(1)
+__all__ = ["executor", "unit_key", "run_units", "script_unit"]
 
 
 @contextlib.contextmanager
@@ -193,35 +171,3 @@ def script_unit(script: str, function: str, /, **options) -> dict[str, bytes]:
             del sys.modules[path.stem]
             raise
     return getattr(module, function)(**options)
-
-
-def estimate_unit(
-    bundle: str,
-    illumination: str = "gensky-clear",
-    noise: str = "relative",
-    camera: str = "auto",
-    seed: int = 0,
-    max_steps: int = 8000,
-) -> dict[str, bytes]:
-    """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
-
-    Runs in one process (parallelism is across units), so the result is the
-    same whatever executor runs it.
-    """
-    from . import estimate
-
-    res = estimate.estimate_bundle(
-        bundle,
-        illumination=illumination,
-        noise=noise,
-        camera=camera,
-        seed=seed,
-        jobs=1,
-        sampler_options={"max_steps": max_steps},
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        nc = Path(tmp) / "posterior.nc"
-        res.idata.to_netcdf(str(nc))
-        data = nc.read_bytes()
-    summary = {**res.summary, "bundle": str(bundle)}
-    return {"summary.json": json.dumps(summary, indent=2).encode(), "posterior.nc": data}

@@ -289,7 +289,7 @@ def fit_groups(
     opts.setdefault("stream_size", n)  # one stream: the unit's facets batched together
     opts.setdefault("min_streams", 1)
     fit_seed, *pop_seeds = seed.spawn(1 + len(groups))
-    samples = sampling.sample_posterior(data, seed=seed_int(fit_seed), jobs=1, **opts)
+    samples = sampling.sample_posterior(data, seed=seed_int(fit_seed), **opts)
     gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
     max_steps = opts.get("max_steps", 8000)
     conv = samples.n_steps < max_steps

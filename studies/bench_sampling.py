@@ -41,6 +41,7 @@ import numpy as np
 
 from bayesgloss import estimate, render, sampling, scene, sequences
 from bayesgloss import likelihood as lk
+from bayesgloss.pool import process_pool
 
 logging.getLogger("emcee").setLevel(logging.ERROR)  # its short-chain warnings, every check
 
@@ -191,7 +192,8 @@ def main(argv=None) -> dict:
     n = len(data.y)
 
     t0 = time.perf_counter()
-    post = sampling.sample_posterior(data, seed=SEED, jobs=args.jobs)
+    with process_pool(args.jobs) as pool:
+        post = sampling.sample_posterior(data, seed=SEED, pool=pool)
     t_batched = time.perf_counter() - t0
     g = post.draws[..., 0]  # (F, E, S)
     conv = np.array([gamma_converged(x) for x in g])

@@ -18,7 +18,7 @@ parameter set (two sets: lobes matched in width by n = 2 / alpha^2 - 2,
 so that Phong and Ward differ in shape only); every candidate's evidence by
 thermodynamic integration and its PSIS-LOO (leave-one-facet-out) are
 recorded; decisions: highest evidence, highest elpd_loo, and the
-one-standard-error LOO rule (:func:`bayesgloss.compare.select_parsimonious`).
+one-standard-error LOO rule (:func:`bayesgloss.loo.select_parsimonious`).
 
 Part ``paper60``: each Radiance sequence compared at the object level
 (one material for all facets) across reflectance {lambert, lambert+phong}
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from scipy import special
 
-from bayesgloss import compare, sequences
+from bayesgloss import compare, evidence, loo, sequences
 from bayesgloss import likelihood as lk
 
 CONFIG = {
@@ -122,7 +122,7 @@ def simulated(cache: str, out: Path, noise: float) -> dict:
             dm = replace(dm, y=np.where(dm.valid, y, 0.0))
             t0 = time.perf_counter()
             ev = compare.model_evidence(
-                replace(m, data=dm), seed=rng, betas=compare.power_ladder(40), **CONFIG["evidence"]
+                replace(m, data=dm), seed=rng, betas=evidence.power_ladder(40), **CONFIG["evidence"]
             )
             log_z[cand[0]], se[cand[0]] = ev.log_z, ev.se
             print(f"gen {gen:14s} cand {cand[0]:14s} {time.perf_counter() - t0:5.1f} s", flush=True)
@@ -205,7 +205,7 @@ def objects(out: Path, noise: float, parameter_set: str) -> dict:
         return m
 
     ev_opts = dict(CONFIG["object_evidence"])
-    betas = compare.power_ladder(ev_opts.pop("n_rungs"))
+    betas = evidence.power_ladder(ev_opts.pop("n_rungs"))
     rows = []
     for gen, truth in CONFIG["object_truth"][parameter_set].items():
         gm = model(gen, np.maximum(bases["phong"].diffuse, 1e-3))
@@ -229,8 +229,8 @@ def objects(out: Path, noise: float, parameter_set: str) -> dict:
             )
         z = np.stack([log_z[n] for n in names])  # (M, objects)
         for k, obj in enumerate(ids):
-            loo = compare.loo_compare(fits, problem=k)
-            table = loo["table"]
+            loo_k = loo.loo_compare(fits, problem=k)
+            table = loo_k["table"]
             srt = np.sort(z[:, k])
             rows.append(
                 {
@@ -240,7 +240,7 @@ def objects(out: Path, noise: float, parameter_set: str) -> dict:
                     "chosen_evidence": names[int(np.argmax(z[:, k]))],
                     "log_bf_best_vs_next": float(srt[-1] - srt[-2]),
                     "chosen_loo": min(table, key=lambda r: r["rank"])["model"],
-                    "chosen_loo_parsimonious": compare.select_parsimonious(table, n_params),
+                    "chosen_loo_parsimonious": loo.select_parsimonious(table, n_params),
                     "log_z": {n: float(log_z[n][k]) for n in names},
                     "log_z_se": {n: float(se[n][k]) for n in names},
                     "loo": {
@@ -289,7 +289,7 @@ def _paper_one(cfg, path) -> dict:
         level="object",
     )
     opts = dict(CONFIG["paper_evidence"])
-    betas = compare.power_ladder(opts.pop("n_rungs"))
+    betas = evidence.power_ladder(opts.pop("n_rungs"))
     log_z, se = {}, {}
     for (r, s), m in models.items():
         ev = compare.model_evidence(m, seed=CONFIG["seed"], betas=betas, **opts)
@@ -301,11 +301,11 @@ def _paper_one(cfg, path) -> dict:
         )
         for s in CONFIG["paper_skies"]
     }
-    sky = compare.sky_posterior(sky_z)
+    sky = evidence.sky_posterior(sky_z)
     best_sky = sky["best"]
     lam = log_z[("lambert", best_sky)] - log_z[("lambert+phong", best_sky)]
     fit = compare.fit_model(models[("lambert+phong", best_sky)], seed=CONFIG["seed"], steps=800)
-    sd = compare.savage_dickey(fit.draws[0, ..., 0].ravel())
+    sd = evidence.savage_dickey(fit.draws[0, ..., 0].ravel())
     row = {
         "name": cfg.name,
         "view": cfg.view,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bayesgloss import compare, render, sky
+from bayesgloss import compare, evidence, loo, render, sky
 from bayesgloss import likelihood as lk
 from bayesgloss.scene import paper_sequence
 
@@ -21,7 +21,7 @@ def test_boundary_density_beta(b):
     # biased there by O(h f'(0)), the local-linear estimate is not
     rng = np.random.default_rng(1)
     x = rng.beta(1.0, b, 20000)
-    dens, se, _ = compare.boundary_density(x)
+    dens, se, _ = evidence.boundary_density(x)
     assert abs(dens - b) < 4 * se + 0.03 * b  # 4 se plus 3 % for the O(h^2) bias
 
 
@@ -30,19 +30,19 @@ def test_boundary_density_truncated_normal():
     mu, s = 0.05, 0.1
     dist = stats.truncnorm(-mu / s, np.inf, loc=mu, scale=s)
     x = dist.rvs(20000, random_state=np.random.default_rng(2))
-    dens, se, _ = compare.boundary_density(x)
+    dens, se, _ = evidence.boundary_density(x)
     assert abs(dens - dist.pdf(0.0)) < 4 * se + 0.03 * dist.pdf(0.0)
 
 
 def test_savage_dickey_values_and_bound():
     rng = np.random.default_rng(3)
-    res = compare.savage_dickey(rng.beta(1.0, 5.0, 20000))
+    res = evidence.savage_dickey(rng.beta(1.0, 5.0, 20000))
     assert not res["bound"]
     assert res["log_bf01"] == pytest.approx(np.log(5.0), abs=4 * res["se"] + 0.03)
-    far = compare.savage_dickey(rng.beta(20.0, 20.0, 4000))  # no mass near 0
+    far = evidence.savage_dickey(rng.beta(20.0, 20.0, 4000))  # no mass near 0
     assert far["bound"] and far["log_bf01"] < -3
     with pytest.raises(ValueError, match="draws"):
-        compare.savage_dickey([-0.1] * 20)
+        evidence.savage_dickey([-0.1] * 20)
 
 
 # ---------------------------------------------------------- thermodynamic integration
@@ -72,7 +72,7 @@ def _linear_gaussian(n_problems=4, seed=0):
 
 def test_thermodynamic_integration_analytic():
     log_prior, log_lik, start, truth = _linear_gaussian()
-    res = compare.thermodynamic_integration(log_prior, log_lik, start, steps=1500, seed=4)
+    res = evidence.thermodynamic_integration(log_prior, log_lik, start, steps=1500, seed=4)
     # stated uncertainty (se ~ 0.03-0.06) calibrated on 8 problems; 3.5 se
     # keeps the chance of a false failure below 0.2 %
     assert np.all(np.abs(res.log_z - truth) < 3.5 * res.se), (res.log_z - truth, res.se)
@@ -81,11 +81,11 @@ def test_thermodynamic_integration_analytic():
 
 
 def test_power_ladder():
-    b = compare.power_ladder(8, 1e-6)
+    b = evidence.power_ladder(8, 1e-6)
     assert b[0] == 0 and b[-1] == 1 and np.all(np.diff(b) > 0) and len(b) == 8
     assert np.allclose(np.diff(np.log(b[1:])), np.log(1e6) / 6)
     with pytest.raises(ValueError, match="even"):
-        compare.power_ladder(7)
+        evidence.power_ladder(7)
 
 
 # ------------------------------------------------------------------ models
@@ -219,26 +219,26 @@ def test_fit_and_loo_prefers_lambert_on_lambert_data(scene_models):
         for r in ("lambert", "phong", "lambert+phong")
     }
     assert np.all(fits["lambert"].rhat < 1.05)
-    res = compare.loo_compare(fits)
+    res = loo.loo_compare(fits)
     rows = {r["model"]: r for r in res["table"]}
     assert set(rows) == set(fits)
     for r in rows.values():  # Pareto k is reported for every model
         assert r["pareto_k_max"] >= 0 and r["n_terms"] == fits["lambert"].valid.sum()
         assert r["warning"] == (r["pareto_k_high"] > 0)
     assert rows["phong"]["elpd_diff"] > 4 * rows["phong"]["dse"]
-    choice = compare.select_parsimonious(res["table"], {r: m.n_params for r, m in models.items()})
+    choice = loo.select_parsimonious(res["table"], {r: m.n_params for r, m in models.items()})
     assert choice == "lambert"
-    one = compare.loo_compare(fits, problem=0)
+    one = loo.loo_compare(fits, problem=0)
     assert one["table"][0]["n_terms"] == fits["lambert"].valid[0].sum()
 
 
 def test_sky_posterior_and_mixture():
-    res = compare.sky_posterior(
+    res = evidence.sky_posterior(
         {"a": -10.0, "b": -10.0 - np.log(3.0)}, log_z_se={"a": 0.1, "b": 0.1}
     )
     assert res["prob"]["a"] == pytest.approx(0.75) and res["best"] == "a"
     assert res["log_bf_best_vs_next"] == pytest.approx(np.log(3.0))
-    g = compare.marginal_gamma(
+    g = evidence.marginal_gamma(
         {"a": np.zeros((2, 100)), "b": np.ones((2, 100))}, res["prob"], n=20000
     )
     assert g.shape == (2, 20000)
@@ -374,7 +374,7 @@ def test_object_evidence_prefers_generating_model():
             object_size=size,
         )
         ev = compare.model_evidence(
-            m, seed=41, burn=100, steps=200, n_walkers=8, betas=compare.power_ladder(24)
+            m, seed=41, burn=100, steps=200, n_walkers=8, betas=evidence.power_ladder(24)
         )
         z.append(ev.log_z)
     chosen = np.array(compare.REFLECTANCE_MODELS)[np.argmax(z, axis=0)].reshape(4, -1)
@@ -415,7 +415,7 @@ def test_facet_evidence_tells_lambert_and_phong(scene_models):
                     burn=300,
                     steps=600,
                     n_walkers=8,
-                    betas=compare.power_ladder(40),
+                    betas=evidence.power_ladder(40),
                 ).log_z
                 for r in compare.REFLECTANCE_MODELS
             ]

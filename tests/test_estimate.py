@@ -9,6 +9,7 @@ from scipy import stats
 
 from bayesgloss import likelihood as lk
 from bayesgloss import render, sampling, scene
+from bayesgloss.pool import process_pool
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +46,8 @@ def _simulate_from_prior(paper_bases, n_rep, seed):
 
 def _sbc(paper_bases, n_rep, seed):
     truth, data = _simulate_from_prior(paper_bases, n_rep, seed)
-    post = sampling.sample_posterior(data, seed=seed, jobs=2)
+    with process_pool(2) as pool:
+        post = sampling.sample_posterior(data, seed=seed, pool=pool)
     draws = post.draws.reshape(n_rep, -1, data.n_params)
     thin = draws[:, :: draws.shape[1] // 99][:, :99]  # L = 99 draws: ranks 0..99
     ranks = np.sum(thin < truth[:, None, :], axis=1)  # (R, P)
@@ -96,7 +98,8 @@ def test_sbc_detects_a_wrong_posterior(paper_bases):
     # power check: the same machinery rejects a posterior computed with the
     # noise scale fixed 3x too small (overconfident) on the same replicates
     truth, data = _simulate_from_prior(paper_bases, 240, seed=13)
-    post = sampling.sample_posterior(data, seed=13, jobs=2)
+    with process_pool(2) as pool:
+        post = sampling.sample_posterior(data, seed=13, pool=pool)
     draws = post.draws.reshape(240, -1, data.n_params)
     centre = np.median(draws, axis=1, keepdims=True)
     shrunk = centre + (draws - centre) / 3.0

@@ -12,7 +12,7 @@ import time
 import pytest
 from conftest import make_synthetic_bundle
 
-from bayesgloss import runner
+from bayesgloss import estimate, runner
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +34,7 @@ def _units(bundles):
                 "noise": "relative",
                 "camera": "auto",
                 "seed": 3,
+                "max_steps": 8000,  # the command line's default
             },
         )
         for b in bundles
@@ -82,7 +83,7 @@ def test_killed_run_resumes_without_redoing_finished_units(bundles, tmp_path):
     for name, stamp in finished.items():
         assert now[name].stat().st_mtime_ns == stamp  # not recomputed
     # and the numbers equal an uninterrupted run's
-    clean = runner.run_units(runner.estimate_unit, _units(bundles), tmp_path / "clean", jobs=2)
+    clean = runner.run_units(estimate.estimate_unit, _units(bundles), tmp_path / "clean", jobs=2)
     for folder in clean:
         assert _object_gamma(now[folder.name]) == _object_gamma(folder)
 
@@ -90,12 +91,12 @@ def test_killed_run_resumes_without_redoing_finished_units(bundles, tmp_path):
 def test_dask_cluster_gives_the_local_numbers(bundles, tmp_path):
     distributed = pytest.importorskip("distributed")
     units = _units(bundles[:2])
-    local = runner.run_units(runner.estimate_unit, units, tmp_path / "local", jobs=2)
+    local = runner.run_units(estimate.estimate_unit, units, tmp_path / "local", jobs=2)
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
         remote = runner.run_units(
-            runner.estimate_unit, units, tmp_path / "dask", scheduler=cluster.scheduler_address
+            estimate.estimate_unit, units, tmp_path / "dask", scheduler=cluster.scheduler_address
         )
     for a, b in zip(local, remote, strict=True):
         assert a.name == b.name
@@ -164,8 +165,8 @@ def test_workers_end_when_their_parent_is_killed():
     # the workers must end within seconds instead of computing on as orphans
     script = (
         "import os, sys, time\n"
-        "from bayesgloss import runner\n"
-        "pool = runner.process_pool(2)\n"
+        "from bayesgloss.pool import process_pool\n"
+        "pool = process_pool(2)\n"
         "pids = set()\n"
         "while len(pids) < 2:\n"
         "    pids |= {f.result() for f in [pool.submit(os.getpid) for _ in range(8)]}\n"

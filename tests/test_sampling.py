@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from bayesgloss import diagnostics, sampling
 from bayesgloss import likelihood as lk
-from bayesgloss import sampling
+from bayesgloss.pool import process_pool
 from bayesgloss.render import FacetBases
 
 
@@ -19,7 +20,7 @@ def test_integrated_time_of_ar1_processes():
     e = rng.standard_normal(x.shape)
     for t in range(1, n):
         x[t] = phis[:, None, None] * x[t - 1] + e[t]
-    tau = sampling.integrated_time(x)[:, 0]
+    tau = diagnostics.integrated_time(x)[:, 0]
     # 8 walkers x 20000 steps: the estimator's error is a few percent
     np.testing.assert_allclose(tau, (1 + phis) / (1 - phis), rtol=0.08)
     # and it agrees with emcee's own estimator on the walker-averaged ACF
@@ -40,8 +41,10 @@ def test_integrated_time_of_a_narrow_float32_chain():
     for t in range(1, n):
         x[t] = phi * x[t - 1] + np.sqrt(1 - phi**2) * e[t]
     chain = 11.727 + 4e-5 * x
-    want = sampling.integrated_time(chain)
-    np.testing.assert_allclose(sampling.integrated_time(chain.astype(np.float32)), want, rtol=0.01)
+    want = diagnostics.integrated_time(chain)
+    np.testing.assert_allclose(
+        diagnostics.integrated_time(chain.astype(np.float32)), want, rtol=0.01
+    )
     assert 8 < want[0, 0] < 25  # (1 + phi) / (1 - phi) = 15.7
 
 
@@ -137,12 +140,13 @@ def test_results_do_not_depend_on_the_number_of_jobs():
         draws_per_ensemble=40,
         max_steps=400,
     )
-    one = sampling.sample_posterior(data, jobs=1, **kw)
-    two = sampling.sample_posterior(data, jobs=2, **kw)
+    one = sampling.sample_posterior(data, **kw)
+    with process_pool(2) as pool:  # the streams spread over two processes
+        two = sampling.sample_posterior(data, pool=pool, **kw)
     np.testing.assert_array_equal(one.draws, two.draws)
-    again = sampling.sample_posterior(data, jobs=1, **kw)
+    again = sampling.sample_posterior(data, **kw)
     np.testing.assert_array_equal(one.draws, again.draws)
-    other = sampling.sample_posterior(data, jobs=1, **{**kw, "seed": 8})
+    other = sampling.sample_posterior(data, **{**kw, "seed": 8})
     assert not np.array_equal(one.draws, other.draws)
 
 
@@ -222,7 +226,7 @@ def test_rank_diagnostics_equal_arviz():
             x[1] = np.round(x[1])  # ties
             x[2] += 3.0 * np.arange(4)[:, None]  # chains that never met
             x[3] = (x[3] > 0.5).astype(float)  # binary
-            rhat, ess_bulk, ess_tail = sampling.rank_diagnostics(x)
+            rhat, ess_bulk, ess_tail = diagnostics.rank_diagnostics(x)
             for i in range(len(x)):
                 with np.errstate(divide="ignore", invalid="ignore"):
                     ref = (
@@ -232,9 +236,9 @@ def test_rank_diagnostics_equal_arviz():
                     )
                 ours = (rhat[i], ess_bulk[i], ess_tail[i])
                 np.testing.assert_allclose(ours, ref, rtol=1e-9, equal_nan=True)
-    assert sampling.gamma_converged(_ar1(0.5, (3, 4, 996), rng)).all()
+    assert diagnostics.converged(_ar1(0.5, (3, 4, 996), rng)).all()
     stuck = _ar1(0.5, (1, 4, 996), rng) + 2.0 * np.arange(4)[None, :, None]
-    assert not sampling.gamma_converged(stuck)[0]
+    assert not diagnostics.converged(stuck)[0]
 
 
 def test_exponent_jump_gets_mode_weights_of_a_bimodal_target():
