@@ -48,10 +48,13 @@ Ground
 ------
 ``ground="plane"``: below the horizon the facet sees a Lambertian ground plane
 of reflectance ``ground_reflectance`` lit by sun and sky (radiance
-rho_g E_h / pi, with E_h the horizontal irradiance from the same quadrature);
-the object's shadow on the ground is neglected. ``ground="sky"``: the sky
-model's own value below the horizon (gensky's and gendaylit's ground glow,
-as in a Radiance scene with no ground plane).
+rho_g E_h / pi, with E_h the horizontal irradiance from the same quadrature).
+When the geometry names an occluder (:attr:`ViewGeometry.occluder`), ground
+points in the object's shadow (:func:`ground_shadow`) lose the sun's share
+rho_g E_sun,h / pi: the glossy, Ward and mirror terms at each of their
+incident directions, the diffuse basis as a correction on a coarser grid
+(:data:`SHADOW_RESOLUTION`). ``ground="sky"``: the sky model's own value below the horizon (gensky's
+and gendaylit's ground glow, as in a Radiance scene with no ground plane).
 
 Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 """
@@ -309,6 +312,57 @@ def ground_plane_radiance(sky, ground_reflectance: float = 0.2, quadrature=None)
     return ground_reflectance * e_h / np.pi
 
 
+def _arriving_radiance(
+    sky,
+    center,
+    directions,
+    occluder=None,
+    *,
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    quadrature=None,
+) -> np.ndarray:
+    """Radiance arriving at points along directions, with the object's ground shadow.
+
+    :func:`incident_radiance`, and for ``ground="plane"`` with an occluder,
+    directions pointing down (z < 0) whose ground point lies in the object's
+    shadow (:func:`ground_shadow`) lose the sun's share of the ground's
+    radiance, rho_g E_sun,h / pi.
+
+    Parameters
+    ----------
+    sky : bayesgloss.sky.DaylightSky
+        Sky and sun for T frames.
+    center : array_like (..., 3) or None
+        Points the radiance arrives at, broadcast against ``directions`` [m];
+        only read when there is a shadow to find.
+    directions : array_like (..., 3)
+        Unit vectors from the points toward the sky or ground.
+    occluder : array_like (V, 3), optional
+        Vertices of the convex object casting the shadow [m]; None: no shadow.
+    ground, ground_reflectance, quadrature
+        See :func:`incident_radiance`.
+
+    Returns
+    -------
+    ndarray (..., T)
+        Radiance [W sr^-1 m^-2]; the sun disc is not included.
+    """
+    radiance = incident_radiance(
+        sky, directions, ground=ground, ground_reflectance=ground_reflectance, quadrature=quadrature
+    )
+    if ground == "plane" and occluder is not None:
+        d = np.asarray(directions, dtype=float)
+        down = d[..., 2] < 0
+        if np.any(down):
+            # directions that see the object's shadow on the ground lose the sun's share
+            idx = np.nonzero(down)
+            pts = _ground_points(np.broadcast_to(center, d.shape)[idx], d[idx])
+            shadow = ground_shadow(pts, sky.sun_direction, occluder)  # (M, T)
+            radiance[idx] -= shadow * _sun_share_of_ground(sky, ground_reflectance)
+    return radiance
+
+
 def diffuse_components(
     geometry: ViewGeometry,
     sky,
@@ -467,11 +521,7 @@ def glossy_basis(
     half = np.arccos(np.clip(np.nan_to_num(ratio, nan=-1.0, posinf=1.0, neginf=-1.0), -1, 1))
     weight = w_u * half / np.pi  # (F, N, 2U); per node also wy / 2
 
-    l_ground = None
-    if ground == "plane":
-        l_ground = ground_plane_radiance(sky, ground_reflectance)
     sun, e_sun = _sun_terms(sky)
-    sun_share = _sun_share_of_ground(sky, ground_reflectance)
     sun_radius = np.sqrt(sky.sun_solid_angle / np.pi)  # small-angle disc radius [rad]
 
     out = np.empty((len(normal), len(n), len(sun)))
@@ -488,16 +538,15 @@ def glossy_basis(
         else:
             cos_i = np.maximum(np.einsum("cnubk,ck->cnub", dirs, normal[sl]), 0.0)
             h = cos_i * ((n + 2.0) / (n + 1.0))[None, :, None, None] * (wy / 2)
-        radiance = sky.radiance(dirs)  # (C, N, 2U, B, T)
-        if l_ground is not None:
-            down = dirs[..., 2] < 0
-            radiance = np.where(down[..., None], l_ground, radiance)
-            if geometry.occluder is not None and np.any(down):
-                # nodes that see the object's shadow on the ground lose the sun's share
-                idx = np.nonzero(down)
-                pts = _ground_points(geometry.center[sl][idx[0]], dirs[idx])
-                shadow = ground_shadow(pts, sun, geometry.occluder)  # (M, T)
-                radiance[idx] -= shadow * sun_share
+        centers = None if geometry.center is None else geometry.center[sl, None, None, None, :]
+        radiance = _arriving_radiance(
+            sky,
+            centers,
+            dirs,
+            geometry.occluder,
+            ground=ground,
+            ground_reflectance=ground_reflectance,
+        )  # (C, N, 2U, B, T)
         out[sl] = np.einsum("cnub,cnubt,cnu->cnt", h, radiance, weight[sl])
 
         # sun disc: lobe averaged over the disc times the disc's irradiance
@@ -524,14 +573,14 @@ def mirror_radiance(
     where the mirror direction falls inside the disc.
     """
     mirror = geometry.mirror_direction
-    radiance = incident_radiance(
-        sky, mirror, ground=ground, ground_reflectance=ground_reflectance
+    radiance = _arriving_radiance(
+        sky,
+        geometry.center,
+        mirror,
+        geometry.occluder,
+        ground=ground,
+        ground_reflectance=ground_reflectance,
     )  # (F, T)
-    down = mirror[:, 2] < 0
-    if ground == "plane" and geometry.occluder is not None and np.any(down):
-        pts = _ground_points(geometry.center[down], mirror[down])
-        shadow = ground_shadow(pts, sky.sun_direction, geometry.occluder)  # (Fd, T)
-        radiance[down] -= shadow * _sun_share_of_ground(sky, ground_reflectance)
     sun = np.asarray(sky.sun_direction, dtype=float)
     cos_disc = np.cos(np.sqrt(sky.sun_solid_angle / np.pi))
     in_disc = (mirror @ sun.T) >= cos_disc
@@ -694,7 +743,10 @@ def ward_glossy_basis(
     i = 2 (h.o) h - o the mirror of o about h. Gauss-Laguerre nodes in t and
     equal steps in phi integrate every roughness with the same nodes. The sun
     is a point source: its disc (radius 0.0047 rad) moves h by half that,
-    small beside the smallest default alpha (0.02).
+    small beside the smallest default alpha (0.02). With ``ground="plane"``
+    and an occluder in ``geometry``, incident directions that see the
+    object's shadow on the ground lose the sun's share of the ground's
+    radiance, as in :func:`glossy_basis`.
 
     Parameters
     ----------
@@ -746,8 +798,15 @@ def ward_glossy_basis(
         with np.errstate(divide="ignore", invalid="ignore"):
             weight = np.where(ok, cos_i / (ho * cd[None, :, :, None]), 0.0)
         weight *= w_t[None, None, :, None] / n_phi
-        radiance = incident_radiance(
-            sky, inc, ground=ground, ground_reflectance=ground_reflectance, quadrature=quad
+        centers = None if geometry.center is None else geometry.center[sl, None, None, None, :]
+        radiance = _arriving_radiance(
+            sky,
+            centers,
+            inc,
+            geometry.occluder,
+            ground=ground,
+            ground_reflectance=ground_reflectance,
+            quadrature=quad,
         )  # (C, N, Tn, Phi, T)
         out[sl] = np.einsum("cntp,cntpk->cnk", weight, radiance)
         # the sun as a point source: f(sun, o) cos(theta_s) E_sun
