@@ -49,10 +49,23 @@ of another size; a time with no UTC offset; a normal that is not of unit
 length within 1e-3; a latitude outside [-90, 90] or a longitude outside
 [-180, 180]; a facet id that ``facets.png`` never holds; a wrong ``format``
 literal, a missing or ill-typed required field, an empty frame or facet
-list, a duplicate facet id. It *reports* in the facet curves' ``valid`` mask
-and ``flags``, and does not reject: frames with the sun below the horizon,
-NaN or infinite pixels, saturated pixels, and facets with fewer than
-``min_pixels`` (default :data:`MIN_PIXELS` = 4) labelled pixels.
+list, a duplicate facet id; a ``camera.position`` that sees no facet: at a
+facet centre (within 1e-3 times the object's size, the diagonal of the box
+around the facet centres, or within 1 mm when the centres coincide), where
+the viewing direction is undefined, or behind every facet, (position -
+center) . normal <= 0 for all of them (as for a camera inside a convex
+object). Every listed facet counts, since a listed facet that
+``facets.png`` never holds is rejected first. It *reports* in the
+facet curves' ``valid`` mask and ``flags``, and does not reject: frames with
+the sun below the horizon, NaN or infinite pixels, saturated pixels, and
+facets with fewer than ``min_pixels`` (default :data:`MIN_PIXELS` = 4)
+labelled pixels. It *warns* (:class:`BundleWarning`) of labels that no facet
+lists (their pixels are ignored) and of frames that share a time: those are
+kept, each frame an independent observation of the same sun and sky.
+
+Frames keep the manifest's order, which need not be the order of their
+times: the reader does not sort them, and neither warns of nor rejects
+frames out of time order.
 """
 
 from __future__ import annotations
@@ -97,12 +110,12 @@ from .images import (  # noqa: F401 - re-exported: the bundle API includes the c
     write_tiff,
 )
 from .reflectance import LUMINANCE_WEIGHTS
+from .sky import WHITE_EFFICACY  # Radiance's 179 lm/W: cd m^-2 per W sr^-1 m^-2
 
 __all__ = [
     "FLAG_REASONS",
     "FORMAT",
     "FRAME_FORMATS",
-    "LUMINOUS_EFFICACY",
     "MANIFEST",
     "LABELS",
     "MIN_PIXELS",
@@ -141,9 +154,6 @@ MANIFEST = "sequence.json"
 LABELS = "facets.png"
 #: Facets with fewer labelled pixels are reported as ``too-few-pixels``.
 MIN_PIXELS = 4
-#: Radiance's luminous efficacy of its radiance unit, lm W^-1 (cd m^-2 per
-#: W sr^-1 m^-2).
-LUMINOUS_EFFICACY = 179.0
 #: Reasons an observation is left out, in the order of :attr:`FacetCurves.flag_bits`.
 FLAG_REASONS = ("sun-below-horizon", "nan-pixels", "saturated", "too-few-pixels")
 #: Robust summaries of a facet's pixel luminances.
@@ -159,6 +169,10 @@ FRAME_FORMATS = {
 }
 
 _NORMAL_TOLERANCE = 1e-3
+#: A camera nearer a facet centre than this fraction of the object's size (the
+#: diagonal of the box around the facet centres; 1 m when they coincide) is
+#: at that centre.
+_CAMERA_AT_CENTER = 1e-3
 _WEIGHTS = np.asarray(LUMINANCE_WEIGHTS, dtype=float)
 
 
@@ -360,6 +374,61 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     )
 
 
+def _check_camera(check: _Checker, position: np.ndarray, facets: Facets) -> None:
+    """Reject a camera at a facet centre or behind every facet (``camera.position``).
+
+    At a facet centre the viewing direction is undefined (0 / 0 in
+    :func:`bayesgloss.geometry.view_directions`); behind every facet, (camera -
+    center) . normal <= 0 for all of them, no facet faces the camera, as for a
+    camera inside a convex object. "At" means within :data:`_CAMERA_AT_CENTER`
+    times the object's size, the diagonal of the box around the facet centres
+    (taken as 1 m when the centres coincide, as for a single facet).
+    """
+    center = np.asarray(facets.center, dtype=float)
+    offset = position - center  # (F, 3): from each facet centre to the camera, m
+    distance = np.linalg.norm(offset, axis=-1)
+    size = float(np.linalg.norm(np.ptp(center, axis=0)))
+    tolerance = _CAMERA_AT_CENTER * (size if size > 0.0 else 1.0)
+    nearest = int(np.argmin(distance))
+    if distance[nearest] <= tolerance:
+        raise check.fail(
+            "camera.position",
+            f"camera position {position.tolist()} is at the centre of facets[{nearest}] "
+            f"(id {int(facets.ids[nearest])}): {distance[nearest]:.3g} m from it, within "
+            f"{_CAMERA_AT_CENTER:g} x the object's size ({size:.3g} m), so that facet has "
+            "no viewing direction",
+        )
+    facing = np.sum(offset * np.asarray(facets.normal, dtype=float), axis=-1)
+    if np.all(facing <= 0.0):
+        best = int(np.argmax(facing))
+        raise check.fail(
+            "camera.position",
+            f"camera position {position.tolist()} is behind every facet: "
+            f"(position - center) . normal <= 0 for all {len(facing)} facets (largest "
+            f"{facing[best]:.3g} m, facets[{best}]), so no facet faces the camera (is it "
+            "inside the object, or on a side of it that no listed facet faces?)",
+        )
+
+
+def _same_time_warning(bundle: Any, times: pd.DatetimeIndex) -> str | None:
+    """The warning text for frames that share a time, or None when no two do."""
+    codes, instants = pd.factorize(times)
+    counts = np.bincount(codes, minlength=len(instants))
+    shared = np.flatnonzero(counts > 1)
+    if not len(shared):
+        return None
+    groups = []
+    for k in shared[:5]:  # a handful of groups is enough to find them
+        index = [f"frames[{i}]" for i in np.flatnonzero(codes == k)]
+        names = ", ".join(index[:-1]) + f" and {index[-1]}"
+        groups.append(f"{names} have the same time {instants[k].isoformat()}")
+    more = f" (and {len(shared) - 5} more times)" if len(shared) > 5 else ""
+    return (
+        f"bundle '{bundle}': " + "; ".join(groups) + more + "; frames with the same time are "
+        "kept, each an independent observation of the same sun and sky"
+    )
+
+
 # ---------------------------------------------------------------------------
 # bundles
 # ---------------------------------------------------------------------------
@@ -488,6 +557,12 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
     sample type) but no frame pixels; :func:`facet_curves` reads those one
     frame at a time.
 
+    Frames keep the manifest's order, sorted by time or not. Two or more
+    frames with the same time (the same instant in UTC, whatever their
+    offsets) are legal: they are all kept, each frame an independent
+    observation of the same sun and sky, and a :class:`BundleWarning` names
+    them and their time.
+
     Parameters
     ----------
     path : str or path-like
@@ -501,7 +576,13 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
     ------
     BundleError
         For every case the spec rejects (see the module docstring), naming
-        the bundle, the field and the problem.
+        the bundle, the field and the problem; also for a ``camera.position``
+        at a facet centre or behind every facet.
+
+    Warns
+    -----
+    BundleWarning
+        For labels that no facet lists, and for frames with the same time.
     """
     root = Path(path)
     if root.name == MANIFEST and root.is_file():  # the manifest's path names its bundle
@@ -543,6 +624,7 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
             f"facet id {int(missing[0])} never occurs in {LABELS}"
             + (f" (nor do {len(missing) - 1} more ids)" if len(missing) > 1 else ""),
         )
+    _check_camera(check, parsed.camera_position, parsed.facets)  # every facet is labelled
     present = np.flatnonzero(counts[1:]) + 1
     unlisted = np.setdiff1d(present, ids)
     if len(unlisted):
@@ -590,6 +672,9 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
                 "Radiance, float TIFF or EXR; use 'linear' for integer linear images)",
             )
         files.append(file)
+    same_time = _same_time_warning(path, parsed.times)
+    if same_time:
+        warnings.warn(same_time, BundleWarning, stacklevel=2)
 
     position = _sun.solar_position(
         parsed.times, parsed.site.latitude, parsed.site.longitude, parsed.site.elevation
@@ -777,7 +862,7 @@ def facet_curves(
         order = np.argsort(facet, kind="stable")
         facet, pixels = facet[order], pixels[order]
         group_start = np.concatenate([[0], np.cumsum(n_pixels)[:-1]])
-    scale = LUMINOUS_EFFICACY if bundle.pixel_encoding == "linear-radiance" else 1.0
+    scale = WHITE_EFFICACY if bundle.pixel_encoding == "linear-radiance" else 1.0
 
     def summary(y, bad):
         """The statistic of each facet's pixels that are not ``bad`` (NaN if none)."""
@@ -967,7 +1052,9 @@ def write_bundle(
     ------
     ValueError
         For inputs that would make a bad bundle (the message names the
-        manifest field), or an unknown ``frame_format``.
+        manifest field; a :class:`BundleError` for what :func:`read_bundle`
+        rejects, such as a camera position behind every facet), or an
+        unknown ``frame_format``.
     FileExistsError
         When ``path`` exists and ``overwrite`` is False.
     """
@@ -1029,7 +1116,7 @@ def write_bundle(
         manifest["truth"] = dict(truth)
     for key, value in (extra or {}).items():
         manifest.setdefault(key, value)
-    _parse_manifest(json.loads(json.dumps(manifest)), root)  # same checks as the reader
+    parsed = _parse_manifest(json.loads(json.dumps(manifest)), root)  # the reader's checks
     held = np.isin(ids, label_arr)
     if not np.all(held):
         raise BundleError(
@@ -1037,6 +1124,7 @@ def write_bundle(
             f"facets[{int(np.argmin(held))}].id",
             f"facet id {ids[~held][0]} has no pixel in labels",
         )
+    _check_camera(_Checker(root), parsed.camera_position, parsed.facets)
 
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.partial-", dir=root.parent))

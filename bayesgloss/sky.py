@@ -77,7 +77,9 @@ __all__ = [
 
 # --- constants (Radiance src/common/color.h, gendaylit.c) -------------------
 
-#: Luminous efficacy of Radiance's "white" radiance unit, lm/W (color.h WHTEFFICACY).
+#: Luminous efficacy of Radiance's "white" radiance unit, lm/W (color.h WHTEFFICACY):
+#: luminance [cd m^-2] = 179 x radiance [W sr^-1 m^-2]. The one definition of the
+#: factor in bayesgloss (the bundle reader's ``linear-radiance`` frames use it too).
 WHITE_EFFICACY = 179.0
 #: Efficacy gensky uses for skylight, lm/W (color.h SKYEFFICACY = D65EFFICACY).
 SKY_EFFICACY = 203.0

@@ -5,6 +5,7 @@ import os
 import struct
 import subprocess
 import sys
+import warnings
 import zlib
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import pandas as pd
 import pytest
 
 from bayesgloss import bundle as bd
-from bayesgloss import cli, sun
+from bayesgloss import cli, geometry, sky, sun
 from bayesgloss.geometry import Facets
 from bayesgloss.render import view_geometry
 
@@ -686,6 +687,20 @@ def _int16_frame(path):
     )
 
 
+def _camera_at_center(index):
+    def edit(m):
+        m["camera"]["position"] = m["facets"][index]["center"]
+
+    return _manifest_edit(edit)
+
+
+def _facets_turned_away(m):
+    camera = np.array(m["camera"]["position"])
+    for facet in m["facets"]:  # unit normal along camera -> centre: the camera sees its back
+        away = np.array(facet["center"]) - camera
+        facet["normal"] = (away / np.linalg.norm(away)).tolist()
+
+
 _NO_OFFSET = "1996-06-21T05:00:00"
 
 BAD_BUNDLES = {
@@ -802,6 +817,16 @@ BAD_BUNDLES = {
     "frame sample type": (_int16_frame, "frames[0].file", "samples of type int16"),
     "label image size": (_smaller_labels, "frames[0].file", "but facets.png is 30x23 pixels"),
     "truth not an object": (_set(["truth"], "plastic"), "truth", "must be an object"),
+    "camera at a facet centre": (
+        _camera_at_center(2),
+        "camera.position",
+        "is at the centre of facets[2] (id 3): 0 m from it",
+    ),
+    "camera behind every facet": (
+        _manifest_edit(_facets_turned_away),
+        "camera.position",
+        "is behind every facet: (position - center) . normal <= 0 for all 6 facets",
+    ),
 }
 
 
@@ -859,6 +884,206 @@ def test_unlisted_labels_warn_and_are_ignored(tmp_path):
     curves = bd.facet_curves(bundle)
     reference = _reference_curves(args["frames"], labels, args["facets"].ids, scale=179.0)
     np.testing.assert_allclose(curves.luminance, reference, rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------
+# camera positions that see no facet: rejected
+# ---------------------------------------------------------------------------
+
+
+def _object_bundle(tmp_path, facets, camera, name="obj", **kw):
+    """A bundle of ``facets`` (each a 3 x 3 block of the labels) seen from ``camera``."""
+    rng = np.random.default_rng(20)
+    n = len(facets)
+    labels = np.zeros((4, 4 * n), int)
+    for k, fid in enumerate(facets.ids):
+        labels[:3, 4 * k : 4 * k + 3] = fid
+    frames = [rng.uniform(0.1, 1.0, labels.shape + (3,)).astype(np.float32) for _ in DAY_TIMES]
+    args = dict(facets=facets, labels=labels, frames=frames, camera_position=camera)
+    return _write(tmp_path, name=name, **{**args, **kw})
+
+
+def _read_fails(path):
+    with pytest.raises(bd.BundleError) as caught:
+        bd.read_bundle(path)
+    assert caught.value.field == "camera.position"
+    return caught.value.problem
+
+
+def _move_camera(path, position):
+    _set(["camera", "position"], [float(v) for v in position])(path)
+
+
+# a box of 2 x 2 x 2 m on the ground: side centres at (+-1, 0, 1), (0, +-1, 1), top (0, 0, 2);
+# the object's size (diagonal of the box around the facet centres) is 3 m
+BOX = geometry.box(size=(2.0, 2.0, 2.0))
+BOX_SIZE = 3.0
+
+
+@pytest.mark.parametrize(
+    "facets, inside",
+    [
+        (BOX, (0.0, 0.0, 1.0)),
+        (BOX, (0.9, -0.5, 0.1)),
+        (geometry.tessellated_hemisphere(n_rings=2, n_segments=8), (0.0, 0.0, 0.3)),
+        (geometry.tessellated_hemisphere(n_rings=6, n_segments=16), (0.2, -0.3, 0.05)),
+    ],
+    ids=["box-centre", "box-near-a-corner", "hemisphere-16", "hemisphere-96"],
+)
+def test_camera_inside_a_convex_object_rejected(tmp_path, facets, inside):
+    path, _ = _object_bundle(tmp_path, facets, camera=(-10.0, 0.0, 2.0))
+    bd.read_bundle(path)  # outside: fine
+    _move_camera(path, inside)
+    problem = _read_fails(path)
+    assert problem.startswith(f"camera position {list(inside)} is behind every facet: ")
+    assert f"(position - center) . normal <= 0 for all {len(facets)} facets" in problem
+    assert "no facet faces the camera" in problem
+    with pytest.raises(bd.BundleError, match="behind every facet"):
+        bd.facet_curves(path)  # and so does everything that reads the bundle
+
+
+def test_camera_at_a_facet_centre_within_the_tolerance(tmp_path):
+    # 1e-3 x the object's size from the +x side's centre (1, 0, 1), along its normal
+    tolerance = 1e-3 * BOX_SIZE
+    path, _ = _object_bundle(tmp_path, BOX, camera=(10.0, 0.0, 1.0))
+    for step in (0.0, 0.5 * tolerance, 0.999 * tolerance):
+        _move_camera(path, (1.0 + step, 0.0, 1.0))
+        problem = _read_fails(path)
+        assert "is at the centre of facets[0] (id 1): " in problem
+        assert f"{step:.3g} m from it, within 0.001 x the object's size (3 m)" in problem
+    _move_camera(path, (1.0 + 1.001 * tolerance, 0.0, 1.0))  # just beyond: sees the +x side
+    assert bd.read_bundle(path).facets.ids.tolist() == [1, 2, 3, 4, 5]
+    _move_camera(path, (1.0 - 1.001 * tolerance, 0.0, 1.0))  # just inside the box
+    assert "behind every facet" in _read_fails(path)
+    _move_camera(path, (0.0, 0.0, 2.0))  # at the top's centre, not the first facet's
+    assert "at the centre of facets[4] (id 5)" in _read_fails(path)
+
+
+def test_camera_checks_of_a_single_facet(tmp_path):
+    # the object's size is 0: the tolerance falls back to 1e-3 m
+    facet = Facets(np.array([1]), np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 0.5]]))
+    path, _ = _object_bundle(tmp_path, facet, camera=(0.0, 0.0, 0.5 + 2e-3))
+    bd.read_bundle(path)
+    _move_camera(path, (0.0, 0.0, 0.5 + 0.5e-3))
+    assert "at the centre of facets[0] (id 1): 0.0005 m from it" in _read_fails(path)
+    _move_camera(path, (3.0, -4.0, 0.5))  # in the facet's plane: grazing, not facing
+    problem = _read_fails(path)
+    assert "behind every facet" in problem and "(largest 0 m, facets[0])" in problem
+
+
+def test_one_facet_facing_the_camera_is_enough(tmp_path):
+    # from (10, 0, 0.5) only the box's +x side faces the camera
+    path, _ = _object_bundle(tmp_path, BOX, camera=(10.0, 0.0, 0.5))
+    assert len(bd.read_bundle(path).facets) == 5
+
+
+def test_unlabelled_facet_rejected_before_the_camera(tmp_path):
+    # a facet that facets.png never holds is rejected on its own, so the camera
+    # checks only ever weigh facets that appear in the label image
+    path, args = _object_bundle(tmp_path, BOX, camera=(10.0, 0.0, 0.5))
+    labels = args["labels"].copy()
+    labels[labels == 1] = 0  # the only facet that faces the camera
+    bd.write_png(path / bd.LABELS, labels.astype(np.uint8))
+    with pytest.raises(bd.BundleError) as caught:
+        bd.read_bundle(path)
+    assert caught.value.field == "facets[0].id"
+    assert "facet id 1 never occurs in facets.png" in caught.value.problem
+
+
+def test_write_bundle_rejects_a_camera_that_sees_no_facet(tmp_path):
+    for camera, problem in [((0.0, 0.0, 1.0), "behind every facet"), ((0, 1, 1), "centre")]:
+        with pytest.raises(bd.BundleError, match=problem) as caught:
+            _object_bundle(tmp_path, BOX, camera=camera)
+        assert caught.value.field == "camera.position"
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_camera_error_messages_in_full(tmp_path, capsys):
+    facets = Facets(
+        np.array([1, 2]), np.array([[1.0, 0, 0], [0, 0, 1.0]]), np.array([[1.0, 0, 1], [0, 0, 2.0]])
+    )
+    path, _ = _object_bundle(tmp_path, facets, camera=(5.0, 0.0, 1.0))
+    _move_camera(path, (1.0, 0.0, 1.0))
+    assert cli.main(["curves", str(path)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"bayesgloss curves: error: bundle '{path}': field 'camera.position': camera position "
+        "[1.0, 0.0, 1.0] is at the centre of facets[0] (id 1): 0 m from it, within 0.001 x "
+        "the object's size (1.41 m), so that facet has no viewing direction"
+    )
+    _move_camera(path, (-1.0, 0.0, 1.0))
+    assert cli.main(["curves", str(path)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"bayesgloss curves: error: bundle '{path}': field 'camera.position': camera position "
+        "[-1.0, 0.0, 1.0] is behind every facet: (position - center) . normal <= 0 for all 2 "
+        "facets (largest -1 m, facets[1]), so no facet faces the camera (is it inside the "
+        "object, or on a side of it that no listed facet faces?)"
+    )
+
+
+# ---------------------------------------------------------------------------
+# frame times: the same time warns, any order is kept
+# ---------------------------------------------------------------------------
+
+_SAME_TIME_USE = (
+    "frames with the same time are kept, each an independent observation of the same sun and sky"
+)
+
+
+def test_frames_with_the_same_time_warn_and_are_kept(tmp_path):
+    # frames 1 and 2 are the same instant, written with different UTC offsets
+    times = [DAY_TIMES[0], DAY_TIMES[1], DAY_TIMES[1].tz_convert("Europe/Madrid"), DAY_TIMES[3]]
+    path, args = _write(tmp_path, times=[t.isoformat() for t in times])
+    with pytest.warns(bd.BundleWarning) as record:
+        bundle = bd.read_bundle(path)
+    assert [str(w.message) for w in record] == [
+        f"bundle '{path}': frames[1] and frames[2] have the same time "
+        f"1996-06-21T10:00:00+00:00; {_SAME_TIME_USE}"
+    ]
+    assert len(bundle) == 4 and bundle.times[1] == bundle.times[2]
+    np.testing.assert_array_equal(bundle.sun_direction[1], bundle.sun_direction[2])
+    curves = bd.facet_curves(bundle)  # every frame its own observation
+    reference = _reference_curves(args["frames"], args["labels"], args["facets"].ids, scale=179.0)
+    np.testing.assert_allclose(curves.luminance, reference, rtol=1e-12)
+    assert curves.valid.all() and not np.allclose(curves.luminance[:, 1], curves.luminance[:, 2])
+
+
+def test_frames_with_the_same_time_in_groups(tmp_path, capsys):
+    rng = np.random.default_rng(21)
+    facets, labels, frames = _scene(rng, n_frames=6)
+    t0, t1, t2 = DAY_TIMES[:3]
+    path, _ = _write(
+        tmp_path, times=[t0, t1, t0, t0, t1, t2], facets=facets, labels=labels, frames=frames
+    )
+    message = (
+        f"bundle '{path}': frames[0], frames[2] and frames[3] have the same time "
+        "1996-06-21T07:00:00+00:00; frames[1] and frames[4] have the same time "
+        f"1996-06-21T10:00:00+00:00; {_SAME_TIME_USE}"
+    )
+    with pytest.warns(bd.BundleWarning) as record:
+        assert len(bd.read_bundle(path)) == 6
+    assert [str(w.message) for w in record] == [message]
+    assert cli.main(["curves", str(path)]) == 0
+    assert capsys.readouterr().err.strip() == f"bayesgloss curves: warning: {message}"
+
+
+def test_frames_out_of_time_order_keep_their_order(tmp_path):
+    times = DAY_TIMES[[2, 0, 3, 1]]
+    path, args = _write(tmp_path, times=times)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # not sorted, and no warning
+        bundle = bd.read_bundle(path)
+    assert bundle.times.equals(times)
+    expected_sun = sun.sun_direction_at(times, 40.0, 0.0, 0.0)
+    np.testing.assert_allclose(bundle.sun_direction, expected_sun, atol=1e-12)
+    curves = bd.facet_curves(bundle)
+    reference = _reference_curves(args["frames"], args["labels"], args["facets"].ids, scale=179.0)
+    np.testing.assert_allclose(curves.luminance, reference, rtol=1e-12)
+
+
+def test_one_luminous_efficacy():
+    # Radiance's color.h WHTEFFICACY, 179 lm/W, is defined once, in sky.py
+    assert sky.WHITE_EFFICACY == 179.0
+    assert not hasattr(bd, "LUMINOUS_EFFICACY") and "LUMINOUS_EFFICACY" not in bd.__all__
 
 
 # ---------------------------------------------------------------------------
