@@ -61,6 +61,8 @@ __all__ = [
 
 DEFAULT_GLOSS_GRID = np.linspace(0.0, 1.0, 101)
 DEFAULT_EXPONENT = 2.0
+#: Valid frames a facet needs for its peak frame to be compared with others.
+MIN_FRAMES = 2
 
 
 @dataclass(frozen=True)
@@ -242,12 +244,19 @@ def bundle_peak_frame_gloss(bundle, **options) -> BaselineResult:
     BaselineResult
         From the bundle's facet curves and validity, its sun and geometry, with
         frames timed in local apparent solar time.
+
+    Raises
+    ------
+    bayesgloss.bundle.NoUsableData
+        Where no facet has :data:`MIN_FRAMES` valid frames: a peak among
+        fewer frames says nothing of gloss.
     """
     from . import bundle as bundle_io
     from . import sun
 
     b = bundle if isinstance(bundle, bundle_io.Bundle) else bundle_io.read_bundle(bundle)
     curves = bundle_io.facet_curves(b)
+    bundle_io.usable_facets(b, curves.valid, MIN_FRAMES)
     hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
     return peak_frame_gloss(
         curves.luminance,

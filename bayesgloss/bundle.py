@@ -113,6 +113,8 @@ from .reflectance import LUMINANCE_WEIGHTS
 from .sky import WHITE_EFFICACY  # Radiance's 179 lm/W: cd m^-2 per W sr^-1 m^-2
 
 __all__ = [
+    "NoUsableData",
+    "usable_facets",
     "FLAG_REASONS",
     "FORMAT",
     "FRAME_FORMATS",
@@ -206,6 +208,39 @@ class BundleError(ValueError):
 
 class BundleWarning(UserWarning):
     """Something odd in a bundle that the spec does not make an error."""
+
+
+class NoUsableData(ValueError):
+    """No facet of a bundle has enough usable frames for an estimate."""
+
+
+def usable_facets(bundle, usable, min_frames: int) -> np.ndarray:
+    """Facets with at least ``min_frames`` usable frames, (F,) of bool.
+
+    Parameters
+    ----------
+    bundle : Bundle
+    usable : ndarray (F, T) of bool
+        Usable entries of the bundle's facet curves.
+    min_frames : int
+        Usable frames an estimator needs per facet [-].
+
+    Raises
+    ------
+    NoUsableData
+        Where no facet has them (every frame at night, a single frame...),
+        naming the bundle and saying how many frames have the sun up.
+    """
+    usable = np.asarray(usable, dtype=bool)
+    keep = usable.sum(axis=1) >= min_frames
+    if not np.any(keep):
+        n_up, n_t = int(np.sum(bundle.sun_up)), len(bundle.sun_up)
+        best = int(usable.sum(axis=1).max()) if usable.size else 0
+        raise NoUsableData(
+            f"bundle '{bundle.path}': no facet has enough usable frames: {n_up} of {n_t} "
+            f"frames have the sun up, the best facet has {best} usable, {min_frames} needed"
+        )
+    return keep
 
 
 # ---------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from ._thirdparty import arviz
@@ -352,6 +353,12 @@ def _report(args: argparse.Namespace) -> int:
                 f"result '{result}': no {p.name} (made by `bayesgloss estimate BUNDLE --out DIR`)"
             )
     summary = json.loads(summary_path.read_text())
+    facets = summary.get("facets") if isinstance(summary, dict) else None
+    if not facets or not any(f.get("gamma") for f in facets if isinstance(f, dict)):
+        raise ValueError(
+            f"result '{result}': summary.json holds no facet posterior to report "
+            "(no facet had enough usable frames)"
+        )
     b = bundle_io.read_bundle(args.bundle or summary["bundle"])
     idata = arviz().from_netcdf(str(nc_path))
     comparison = (
@@ -464,8 +471,24 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line_warnings(command: str):
+    """A ``warnings.showwarning`` that prints each warning as one line on stderr."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"bayesgloss {command}: warning: {message}", file=sys.stderr)
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warnings(args.command)
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command of ``args``; a bad input is one line on stderr and exit 2."""
     try:
         return args.func(args)
     except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly

@@ -290,7 +290,8 @@ def bundle_models(
     """Every (reflectance, illumination) model of a bundle's facet curves.
 
     Facets with fewer than ``min_frames`` usable frames are left out (the
-    same facets for every model).
+    same facets for every model); a bundle in which no facet has them is
+    rejected (:class:`bayesgloss.estimate.NoUsableData`).
 
     Parameters
     ----------
@@ -310,7 +311,7 @@ def bundle_models(
     b = b if isinstance(b, bundle_io.Bundle) else bundle_io.read_bundle(b)
     curves = bundle_io.facet_curves(b)
     y, usable, censored = estimate.observations(curves)
-    keep = usable.sum(axis=1) >= min_frames
+    keep = estimate.usable_facets(b, usable, min_frames)
     models = {}
     for ill in illumination:
         phong = estimate.bundle_bases(b, ill)

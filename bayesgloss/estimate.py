@@ -75,8 +75,7 @@ ILLUMINATION_MODELS = sky.sky_models()
 MIN_FRAMES = 4
 
 
-class NoUsableData(ValueError):
-    """No facet of a bundle has enough usable frames to estimate its gloss."""
+NoUsableData = bundle_io.NoUsableData
 
 
 def bundle_bases(
@@ -117,29 +116,9 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def usable_facets(b, usable, min_frames: int = MIN_FRAMES) -> np.ndarray:
-    """Facets with at least ``min_frames`` usable frames, (F,) of bool.
-
-    Parameters
-    ----------
-    b : bundle.Bundle
-    usable : ndarray (F, T) of bool
-        Usable entries of the facet curves (:func:`observations`).
-    min_frames : int
-
-    Raises
-    ------
-    NoUsableData
-        Where no facet has them, saying how many frames have the sun up.
-    """
-    keep = usable.sum(axis=1) >= min_frames
-    if not np.any(keep):
-        n_up, n_t = int(np.sum(b.sun_up)), len(b.sun_up)
-        best = int(usable.sum(axis=1).max()) if usable.size else 0
-        raise NoUsableData(
-            f"bundle '{b.path}': no facet has enough usable frames: {n_up} of {n_t} "
-            f"frames have the sun up, the best facet has {best} usable, {min_frames} needed"
-        )
-    return keep
+    """Facets with at least ``min_frames`` usable frames
+    (:func:`bayesgloss.bundle.usable_facets`)."""
+    return bundle_io.usable_facets(b, usable, min_frames)
 
 
 @dataclass

@@ -1,6 +1,12 @@
 """The README's main job: `bayesgloss demo` end to end."""
 
 import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -45,3 +51,123 @@ def test_report_of_a_saved_estimate(tmp_path, capsys):
     assert (out / "report.png").stat().st_size > 50_000
     assert cli.main(["report", str(tmp_path / "nothing")]) == 2
     assert "no summary.json" in capsys.readouterr().err
+
+
+# -- what a newcomer trips on ---------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _edited_bundle(src: Path, dst: Path, edit) -> Path:
+    """A copy of bundle ``src`` with its manifest changed by ``edit(manifest)``."""
+    shutil.copytree(src, dst)
+    manifest = json.loads((dst / "sequence.json").read_text())
+    edit(manifest)
+    (dst / "sequence.json").write_text(json.dumps(manifest))
+    return dst
+
+
+@pytest.fixture(scope="module")
+def odd_bundles(tmp_path_factory):
+    """A synthetic bundle, the same at night (every frame between 00:00 and
+    03:00 UTC at longitude 0 in June), and the same with one frame."""
+    from conftest import make_synthetic_bundle
+
+    root = tmp_path_factory.mktemp("odd")
+    day = make_synthetic_bundle(root / "day", specularity=0.5)
+
+    def night(m):
+        for i, f in enumerate(m["frames"]):
+            f["time"] = f"1996-06-21T{i // 7:02d}:{(i % 7) * 8:02d}:00+00:00"
+
+    def one_frame(m):
+        m["frames"] = m["frames"][9:10]
+
+    return {
+        "day": day,
+        "night": _edited_bundle(day, root / "night", night),
+        "one": _edited_bundle(day, root / "one", one_frame),
+    }
+
+
+@pytest.mark.parametrize("kind", ["night", "one"])
+@pytest.mark.parametrize("command", ["estimate", "compare", "baseline"])
+def test_no_usable_data_is_one_clear_error(odd_bundles, kind, command, capsys):
+    # today's numpy words ("need at least one array to concatenate", "cannot
+    # reshape array of size 0") become what is wrong, with exit 2
+    assert cli.main([command, str(odd_bundles[kind])]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err, err
+    assert err.startswith(f"bayesgloss {command}: error: bundle '{odd_bundles[kind]}'"), err
+    assert "no facet has enough usable frames" in err, err
+    up = "0 of 19 frames have the sun up" if kind == "night" else "1 of 1 frames have the sun up"
+    assert up in err, err
+
+
+def test_report_of_a_result_without_facets(odd_bundles, tmp_path, capsys):
+    # a summary with no facet posterior (hand-made, or from an older run) is
+    # refused in one line rather than failing inside the figure code
+    res = tmp_path / "empty"
+    res.mkdir()
+    (res / "summary.json").write_text(json.dumps({"facets": [], "bundle": "x"}))
+    (res / "posterior.nc").write_bytes(b"")
+    assert cli.main(["report", str(res)]) == 2
+    err = capsys.readouterr().err
+    assert "holds no facet posterior" in err and "Traceback" not in err
+
+
+def test_max_steps_bounds_every_facet(odd_bundles, capsys):
+    # --max-steps reaches the sampler: no facet runs more production steps (the
+    # first convergence check alone comes at 250 steps, so a run that ignored
+    # the option would report a median of at least 250)
+    day = str(odd_bundles["day"])
+    assert (
+        cli.main(["estimate", day, "--quiet", "--json", "--max-steps", "100", "--jobs", "1"]) == 0
+    )
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sampler"]["median_steps"] == 100
+
+
+def test_commands_print_no_third_party_warning(odd_bundles, tmp_path):
+    # run as a user does, in a fresh interpreter with Python's default warning
+    # filters and an empty cache folder (so ArviZ's once-a-day refactor notice
+    # would fire): stderr holds progress and our own lines only
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    env.pop("PYTHONWARNINGS", None)
+    out = tmp_path / "est"
+    runs = [
+        ["estimate", str(odd_bundles["day"]), "--out", str(out), "--max-steps", "200"],
+        ["report", str(out)],
+    ]
+    for args in runs:
+        proc = subprocess.run(
+            [sys.executable, "-m", "bayesgloss.cli", *args], capture_output=True, text=True, env=env
+        )
+        assert proc.returncode == 0, proc.stderr
+        assert "Warning" not in proc.stderr and "warn" not in proc.stderr.lower(), proc.stderr
+    # the notice is really there to be hidden: a bare import shows it (in another
+    # cache folder: ArviZ stamps the day even when its notice is filtered)
+    env["XDG_CACHE_HOME"] = str(tmp_path / "other-cache")
+    proc = subprocess.run(
+        [sys.executable, "-c", "import arviz"], capture_output=True, text=True, env=env
+    )
+    assert "FutureWarning" in proc.stderr
+
+
+def _readme_commands() -> list[str]:
+    """The commands of the README's command table."""
+    text = (ROOT / "README.md").read_text()
+    return sorted(set(re.findall(r"^\| `bayesgloss (\w+)", text, flags=re.M)))
+
+
+def test_readme_command_table_is_the_command_line(capsys):
+    # every command in the README's table exists and its --help runs; every
+    # command of the parser is in the table
+    listed = _readme_commands()
+    parser_commands = set(cli._parser()._subparsers._group_actions[0].choices)
+    assert set(listed) == parser_commands, (listed, parser_commands)
+    for command in listed:
+        with pytest.raises(SystemExit) as stop:
+            cli.main([command, "--help"])
+        assert stop.value.code == 0
+        assert f"usage: bayesgloss {command}" in capsys.readouterr().out
