@@ -92,6 +92,66 @@ def peak_ties(luminance, valid, tolerance: float = 0.01) -> dict:
     }
 
 
+def estimate_curves(luminance, valid, ids, geom, sun_direction, hours, exponents):
+    """Baseline on one sequence's facet curves for each exponent.
+
+    Returns the default exponent's :class:`bayesgloss.baseline.BaselineResult`
+    and one summary per exponent (:func:`_object_rules` and :func:`peak_ties`).
+    """
+    res_default, per_exponent = None, {}
+    for n in sorted({float(CONFIG["exponent"]), *map(float, exponents)}):
+        res = baseline.peak_frame_gloss(
+            luminance,
+            valid,
+            geom,
+            sun_direction,
+            ids=ids,
+            exponent=n,
+            frame_hours=hours,
+        )
+        per_exponent[n] = _object_rules(res) | peak_ties(luminance, valid)
+        if n == float(CONFIG["exponent"]):
+            res_default = res
+    return res_default, per_exponent
+
+
+def sequence_entry(res: baseline.BaselineResult, truth: dict, view: str) -> dict:
+    """One sequence of ``paper60.json`` (without its name): the baseline's JSON,
+    the truth (without the rendering config) and the view."""
+    out = res.to_json()
+    out["truth"] = {k: v for k, v in truth.items() if k != "config"}
+    out["view"] = view
+    out["degenerate_share"] = float(np.mean(["mirror-degenerate" in f for f in res.flags]))
+    return out
+
+
+def sensitivity_rows(cfg, true_gloss: float, per_exponent: dict) -> list[dict]:
+    """``sensitivity.csv``'s rows of one sequence: one per exponent and plateau rule."""
+    rows = []
+    for n, summary in per_exponent.items():
+        for rule, value in summary["rules"].items():
+            rows.append(
+                {
+                    "name": cfg.name,
+                    "sky": cfg.sky,
+                    "material": cfg.material,
+                    "specularity": cfg.specularity,
+                    "view": cfg.view,
+                    "true_gloss": true_gloss,
+                    "exponent": n,
+                    "rule": rule,
+                    "object_gloss": value,
+                    "share_mirror_degenerate": summary["share_mirror_degenerate"],
+                    "share_no_exact_match": summary["share_no_exact_match"],
+                    "plateau_width": summary["plateau_width"],
+                    "facets_used": summary["facets_used"],
+                    "share_peak_tied": summary["share_peak_tied"],
+                    "share_peak_within_1pct": summary["share_peak_within_1pct"],
+                }
+            )
+    return rows
+
+
 def estimate(path, exponents):
     """Baseline on one bundle for each exponent.
 
@@ -101,24 +161,16 @@ def estimate(path, exponents):
     b = bundle.read_bundle(path)
     curves = bundle.facet_curves(b)
     hours = np.unwrap(sun.local_solar_time(b.times, b.site.longitude), period=24)
-    geom = b.view_geometry()
-    out, per_exponent = None, {}
-    for n in sorted({float(CONFIG["exponent"]), *map(float, exponents)}):
-        res = baseline.peak_frame_gloss(
-            curves.luminance,
-            curves.valid,
-            geom,
-            b.sun_direction,
-            ids=curves.ids,
-            exponent=n,
-            frame_hours=hours,
-        )
-        per_exponent[n] = _object_rules(res) | peak_ties(curves.luminance, curves.valid)
-        if n == float(CONFIG["exponent"]):
-            out = res.to_json()
-            out["truth"] = {k: v for k, v in b.truth.items() if k != "config"}
-            out["view"] = b.truth["config"]["view"]
-            out["degenerate_share"] = float(np.mean(["mirror-degenerate" in f for f in res.flags]))
+    res, per_exponent = estimate_curves(
+        curves.luminance,
+        curves.valid,
+        curves.ids,
+        b.view_geometry(),
+        b.sun_direction,
+        hours,
+        exponents,
+    )
+    out = sequence_entry(res, b.truth, b.truth["config"]["view"])
     return out, curves, hours, per_exponent
 
 
@@ -129,27 +181,7 @@ def bundle_results(configs, paths, exponents, figure_view=CONFIG["figure_view"])
         est, curves, hours, per_exponent = estimate(path, exponents)
         est["name"] = cfg.name
         results.append(est)
-        for n, summary in per_exponent.items():
-            for rule, value in summary["rules"].items():
-                rows.append(
-                    {
-                        "name": cfg.name,
-                        "sky": cfg.sky,
-                        "material": cfg.material,
-                        "specularity": cfg.specularity,
-                        "view": cfg.view,
-                        "true_gloss": est["truth"]["gloss"],
-                        "exponent": n,
-                        "rule": rule,
-                        "object_gloss": value,
-                        "share_mirror_degenerate": summary["share_mirror_degenerate"],
-                        "share_no_exact_match": summary["share_no_exact_match"],
-                        "plateau_width": summary["plateau_width"],
-                        "facets_used": summary["facets_used"],
-                        "share_peak_tied": summary["share_peak_tied"],
-                        "share_peak_within_1pct": summary["share_peak_within_1pct"],
-                    }
-                )
+        rows += sensitivity_rows(cfg, est["truth"]["gloss"], per_exponent)
         if cfg.view == figure_view:
             arrays[f"{cfg.name}/luminance"] = curves.luminance
             arrays[f"{cfg.name}/valid"] = curves.valid
@@ -157,6 +189,38 @@ def bundle_results(configs, paths, exponents, figure_view=CONFIG["figure_view"])
             arrays[f"{cfg.name}/n_pixels"] = curves.n_pixels
             arrays["hours"] = hours
     return results, arrays, pd.DataFrame(rows)
+
+
+def curves_results(configs, arrays, exponents):
+    """:func:`bundle_results` redone from saved curves (``curves.npz``), no Radiance.
+
+    For each configuration whose curves ``arrays`` holds (the figure view's),
+    the facets, camera and sun come from the configuration itself, as the
+    bundle was rendered from it. Returns paper60.json's entries of these
+    sequences and their sensitivity table.
+    """
+    results, rows = [], []
+    for cfg in configs:
+        if f"{cfg.name}/luminance" not in arrays:
+            continue
+        ids = arrays[f"{cfg.name}/ids"]
+        facets = cfg.facets()
+        geom = _subset(
+            render.view_geometry(facets, cfg.camera_position()), np.searchsorted(facets.ids, ids)
+        )
+        res, per_exponent = estimate_curves(
+            arrays[f"{cfg.name}/luminance"],
+            arrays[f"{cfg.name}/valid"],
+            ids,
+            geom,
+            cfg.sun_directions(),
+            arrays["hours"],
+            exponents,
+        )
+        truth = cfg.truth()
+        results.append(sequence_entry(res, truth, cfg.view) | {"name": cfg.name})
+        rows += sensitivity_rows(cfg, truth["gloss"], per_exponent)
+    return results, pd.DataFrame(rows)
 
 
 # -- the method's ceiling on its own model --------------------------------------
