@@ -79,7 +79,7 @@ def _demo(args: argparse.Namespace) -> int:
         illumination=(cfg.sky, "gensky-intermediate"),
         seed=0,
     )
-    table = compare.format_comparison(cmp, b.path.name, "object")
+    table = report.format_comparison(cmp, b.path.name, "object")
     (out / "comparison.txt").write_text(table + "\n")
     fig = report.posterior_report(b, res, base, out / "report.png", comparison=table)
     g = res.summary["object"]["gamma"]
@@ -320,7 +320,7 @@ def _estimate_many(args, progress) -> int:
 def _compare(args: argparse.Namespace) -> int:
     import json
 
-    from . import compare
+    from . import compare, report
 
     res = compare.compare_bundle_quick(
         args.bundle,
@@ -334,7 +334,7 @@ def _compare(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
-    print(compare.format_comparison(res, args.bundle, args.level))
+    print(report.format_comparison(res, args.bundle, args.level))
     return 0
 
 

@@ -76,7 +76,6 @@ __all__ = [
     "model_evidence",
     "compare_bundle",
     "compare_bundle_quick",
-    "format_comparison",
 ]
 
 REFLECTANCE_MODELS = ("lambert", "phong", "lambert+phong", "lambert+ward")
@@ -587,38 +586,3 @@ def compare_bundle_quick(
         fit_options=opts,
         evidence_options=ev_opts,
     )
-
-
-def format_comparison(res: dict, name, level: str = "object") -> str:
-    """The comparison table of :func:`compare_bundle` as text."""
-    out = [
-        f"{name}: model comparison, {level} level, {len(res['facets'])} facets (PSIS-LOO: "
-        + ("leave-one-facet-out" if level == "object" else "leave-one-frame-out")
-        + ")",
-        f"{'model':36s} {'elpd_loo':>10} {'se':>7} {'d_elpd':>8} {'dse':>7} "
-        f"{'weight':>6} {'k_max':>6} {'k>0.7':>6}  {'ln Z':>10} {'se':>6} {'ln BF':>8}",
-    ]
-    ev = {e["model"]: e for e in res["evidence"]}
-    for r in res["loo"]["table"]:
-        e = ev[r["model"]]
-        flag = "  WARNING: Pareto k > 0.7" if r["warning"] else ""
-        out.append(
-            f"{r['model']:36s} {r['elpd_loo']:10.1f} {r['se']:7.1f} {r['elpd_diff']:8.1f} "
-            f"{r['dse']:7.1f} {r['weight']:6.3f} {r['pareto_k_max']:6.2f} "
-            f"{r['pareto_k_high']:>3}/{r['n_terms']:<3} {e['log_z']:10.1f} {e['se']:6.2f} "
-            f"{e['log_bf_vs_best']:8.1f}{flag}"
-        )
-    out.append("ln BF: ln Z of the model minus ln Z of the best (thermodynamic integration)")
-    for sky_name, rows in res["savage_dickey"].items():
-        vals = ", ".join(("<= " if r["bound"] else "") + f"{r['log_bf01']:.2f}" for r in rows[:10])
-        more = " ..." if len(rows) > 10 else ""
-        out.append(f"Savage-Dickey ln BF(lambert : lambert+phong), {sky_name}: {vals}{more}")
-    probs = ", ".join(f"{k} {v:.3f}" for k, v in res["sky"]["prob"].items())
-    out.append(f"sky posterior (equal priors): {probs}")
-    not_conv = [k for k, v in res["converged"].items() if not v]
-    if not_conv:
-        out.append(
-            f"WARNING: not converged (R-hat >= 1.01 or run < 50 autocorrelation times): "
-            f"{', '.join(not_conv)}"
-        )
-    return "\n".join(out)
