@@ -15,9 +15,11 @@ Object-level gloss, beside the paper's average of facets:
   population of mean mu and concentration kappa, fitted by reweighting the
   facet posteriors, which were sampled under a uniform prior on gamma (Hogg,
   Myers & Bovy 2010, eq. 11): p(mu, kappa | data) is proportional to
-  p(mu, kappa) prod_f mean_s Beta(gamma_fs; mu kappa, (1 - mu) kappa), a
-  two-parameter density integrated on a grid. The object's gloss is mu.
-  Priors: mu uniform on [0, 1], log kappa uniform on [log 0.5, log 1e4].
+  p(mu, kappa) prod_f int Beta(g; mu kappa, (1 - mu) kappa) p_f(g) dg, p_f a
+  kernel density of facet f's draws with a bandwidth set by their effective
+  sample size (:func:`population_gloss`), a two-parameter density
+  integrated on a grid. The object's gloss is mu. Priors: mu uniform on
+  [0, 1], log kappa uniform on [log 0.5, log 1e4].
 - ``shared``: one material, all facets with the same gamma and n (and their
   own scale and noise): the product of the facets' marginal posteriors of
   (gamma, log n) divided by the prior F - 1 times, evaluated on a grid with a
@@ -40,12 +42,14 @@ that :func:`bayesgloss.runner.run_units` fans out over many bundles.
 
 from __future__ import annotations
 
+import functools
 import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy import special
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
@@ -196,60 +200,103 @@ def to_inference_data(
 def population_gloss(
     gamma_draws,
     *,
+    ess=None,
     seed=0,
     n_mu: int = 199,
     n_kappa: int = 80,
-    max_draws: int = 200,
+    n_bins: int = 400,
+    max_draws: int = 1000,
     n_out: int = 4000,
 ):
-    """Hierarchical Beta population of facet gammas by reweighting (module docstring).
+    """Hierarchical Beta population of facet gammas (module docstring).
 
-    The two population parameters are integrated on a grid (mu at bin centres
-    over (0, 1), log kappa uniform over [log 0.5, log 1e4]); draws are taken
-    from the grid posterior with jitter inside each cell.
+    Facet f's gammas are drawn from Beta(mu kappa, (1 - mu) kappa); its data
+    enter through its posterior of gamma under the uniform prior it was
+    sampled with, so that (Hogg, Myers & Bovy 2010, eq. 11)
+
+        p(mu, kappa | data) ~ p(mu, kappa) prod_f int Beta(g; mu kappa, (1 - mu) kappa) p_f(g) dg.
+
+    Each facet posterior p_f is a Gaussian kernel density of its draws,
+    reflected at 0 and 1, whose bandwidth follows Scott's rule with the
+    draws' *effective* sample size (h = 1.06 sd ESS^(-1/5)): a density of
+    autocorrelated draws then has no more bumps than its information
+    supports. (The earlier estimator, a mean of the Beta density over 200
+    draws, read the clumps of autocorrelated draws from 24 flat posteriors
+    as a population: intervals as narrow as 0.42 where the answer is the
+    prior's.) The integral is a sum over ``n_bins`` bins of the kernel
+    density's mass times the Beta distribution's mass in each bin, exact for
+    a density constant on the bins; so flat facet posteriors give exactly
+    the prior's likelihood, 1. The two population parameters are integrated
+    on a grid (mu at bin centres over (0, 1), log kappa uniform over
+    [log 0.5, log 1e4]); draws are taken from the grid posterior with jitter
+    inside each cell.
 
     Parameters
     ----------
     gamma_draws : array_like (F, S)
         Posterior draws of each facet's gamma under a uniform prior (at most
-        ``max_draws`` per facet are used, evenly spaced).
+        ``max_draws`` per facet are used, evenly spaced) [-].
+    ess : array_like (F,), optional
+        Effective sample size of each facet's draws (default S: independent
+        draws) [-].
     seed : int or Generator
+    n_mu, n_kappa : int
+        Grid of the population parameters.
+    n_bins : int
+        Bins of gamma on which each facet's density is integrated.
 
     Returns
     -------
     dict
         ``mu`` and ``kappa`` draws.
     """
-    from scipy import special
-
     rng = np.random.default_rng(seed)
-    g = np.clip(np.asarray(gamma_draws, dtype=float), 1e-6, 1 - 1e-6)
-    if g.shape[1] > max_draws:
-        g = g[:, np.linspace(0, g.shape[1] - 1, max_draws).round().astype(int)]
-    lg, l1g = np.log(g), np.log1p(-g)
+    g = np.clip(np.asarray(gamma_draws, dtype=float), 0.0, 1.0)
+    n_f, n_s = g.shape
+    n_eff = np.full(n_f, float(n_s)) if ess is None else np.asarray(ess, dtype=float)
+    n_eff = np.clip(np.nan_to_num(n_eff, nan=2.0), 2.0, n_s)
+    h = np.maximum(1.06 * np.std(g, axis=1) * n_eff ** (-0.2), 0.5 / n_bins)
+    if n_s > max_draws:
+        g = g[:, np.linspace(0, n_s - 1, max_draws).round().astype(int)]
+    edges = np.linspace(0.0, 1.0, n_bins + 1)
+    mass = np.empty((n_f, n_bins))
+    for f in range(n_f):  # one facet at a time bounds memory (draws x bins)
+        x = g[f]
+        cdf = sum(
+            special.ndtr((edges[:, None] - r[None, :]) / h[f]) for r in (x, -x, 2.0 - x)
+        ).mean(axis=1)  # reflected kernels: the mass below each edge
+        mass[f] = np.diff(cdf)
+    mass /= mass.sum(axis=1, keepdims=True)
+    lkap, beta_mass = _beta_bin_masses(n_mu, n_kappa, n_bins)  # (n_mu n_kappa, n_bins)
+    with np.errstate(divide="ignore"):
+        logp = np.log(beta_mass @ (mass.T * n_bins)).sum(axis=1)  # density = mass / width
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    pick = rng.choice(len(w), size=n_out, p=w)
+    i, j = np.unravel_index(pick, (n_mu, n_kappa))
+    mu = (np.arange(n_mu) + 0.5) / n_mu
+    dmu, dk = 1.0 / n_mu, lkap[1] - lkap[0]
+    mu_s = np.clip(mu[i] + dmu * (rng.random(n_out) - 0.5), 0, 1)
+    k_s = np.exp(lkap[j] + dk * (rng.random(n_out) - 0.5))
+    return {"mu": mu_s, "kappa": k_s}
+
+
+@functools.lru_cache(maxsize=4)
+def _beta_bin_masses(n_mu: int, n_kappa: int, n_bins: int):
+    """log kappa grid (n_kappa,) and the mass of Beta(mu kappa, (1 - mu) kappa)
+    in each of ``n_bins`` equal bins of [0, 1], (n_mu n_kappa, n_bins), mu at
+    the centres of ``n_mu`` bins (cached: the same for every object)."""
     mu = (np.arange(n_mu) + 0.5) / n_mu
     lkap = np.linspace(np.log(0.5), np.log(1e4), n_kappa)
     kap = np.exp(lkap)
     a = (mu[:, None] * kap[None, :]).ravel()
     b = ((1 - mu)[:, None] * kap[None, :]).ravel()
-    logp = -len(g) * (special.betaln(a, b) + np.log(g.shape[1]))
-    # log-sum-exp over the draws in float32 (kernel logs to ~1e-7 relative,
-    # ~0.01 nats on the grid's log density: far below its cell-to-cell range)
-    shape = np.stack([a - 1, b - 1], axis=1).astype(np.float32)  # (grid, 2)
-    for f in range(len(g)):  # facets one at a time bounds memory (grid x draws)
-        terms = shape @ np.stack([lg[f], l1g[f]]).astype(np.float32)  # (grid, draws)
-        top = terms.max(axis=1)
-        terms -= top[:, None]
-        np.exp(terms, out=terms)
-        logp += top + np.log(terms.sum(axis=1, dtype=np.float64))
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
-    pick = rng.choice(len(w), size=n_out, p=w)
-    i, j = np.unravel_index(pick, (n_mu, n_kappa))
-    dmu, dk = 1.0 / n_mu, lkap[1] - lkap[0]
-    mu_s = np.clip(mu[i] + dmu * (rng.random(n_out) - 0.5), 0, 1)
-    k_s = np.exp(lkap[j] + dk * (rng.random(n_out) - 0.5))
-    return {"mu": mu_s, "kappa": k_s}
+    edges = np.linspace(0.0, 1.0, n_bins + 1)
+    cdf = special.betainc(a[:, None], b[:, None], edges[None, :])
+    masses = np.diff(cdf, axis=1)
+    masses.flags.writeable = False
+    lkap.flags.writeable = False
+    return lkap, masses
 
 
 def shared_gloss(
@@ -409,7 +456,8 @@ def estimate_bundle(
             {"id": int(fid), "gamma": None, "converged": False, "flags": ["too-few-frames"]}
         )
     conv = diag["converged"]
-    pop = population_gloss(per_facet[conv] if conv.sum() >= 2 else per_facet, seed=seed)
+    use = conv if conv.sum() >= 2 else np.ones(len(conv), dtype=bool)
+    pop = population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)
     logn = np.log(idata.posterior["n"].values).transpose(2, 0, 1).reshape(len(ids), -1)
     shared = shared_gloss(
         np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data.priors

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesgloss import baseline, estimate, render, runner, sampling, scene, sky, sun
+from bayesgloss import baseline, diagnostics, estimate, render, runner, sampling, scene, sky, sun
 from bayesgloss import likelihood as lk
 
 STUDIES = Path(__file__).resolve().parent
@@ -291,13 +291,17 @@ def fit_groups(
     fit_seed, *pop_seeds = seed.spawn(1 + len(groups))
     samples = sampling.sample_posterior(data, seed=seed_int(fit_seed), **opts)
     gam = samples.draws[..., 0].reshape(n, -1)  # (F, E*S)
+    ess = diagnostics.rank_diagnostics(samples.draws[..., 0])[1]  # bulk ESS of each gamma
     max_steps = opts.get("max_steps", 8000)
     conv = samples.n_steps < max_steps
     out, lo = [], 0
     for g, pop_seed in zip(groups, pop_seeds, strict=True):
         hi = lo + len(g["y"])
         pop = estimate.population_gloss(
-            gam[lo:hi], seed=seed_int(pop_seed), max_draws=cfg.get("population_draws", 200)
+            gam[lo:hi],
+            ess=ess[lo:hi],
+            seed=seed_int(pop_seed),
+            max_draws=cfg.get("population_draws", 1000),
         )["mu"]
         q = np.quantile(gam[lo:hi], [0.05, 0.5, 0.95], axis=1)
         out.append(
