@@ -265,7 +265,7 @@ def population_gloss(
         cdf = sum(
             special.ndtr((edges[:, None] - r[None, :]) / h[f]) for r in (x, -x, 2.0 - x)
         ).mean(axis=1)  # reflected kernels: the mass below each edge
-        mass[f] = np.diff(cdf)
+        mass[f] = np.maximum(np.diff(cdf), 0.0)  # rounding can make far tails negative
     mass /= mass.sum(axis=1, keepdims=True)
     lkap, beta_mass = _beta_bin_masses(n_mu, n_kappa, n_bins)  # (n_mu n_kappa, n_bins)
     with np.errstate(divide="ignore"):
@@ -293,7 +293,7 @@ def _beta_bin_masses(n_mu: int, n_kappa: int, n_bins: int):
     b = ((1 - mu)[:, None] * kap[None, :]).ravel()
     edges = np.linspace(0.0, 1.0, n_bins + 1)
     cdf = special.betainc(a[:, None], b[:, None], edges[None, :])
-    masses = np.diff(cdf, axis=1)
+    masses = np.maximum(np.diff(cdf, axis=1), 0.0)  # rounding can make far tails negative
     masses.flags.writeable = False
     lkap.flags.writeable = False
     return lkap, masses

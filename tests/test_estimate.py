@@ -373,3 +373,16 @@ def test_population_of_flat_autocorrelated_facets_stays_flat():
         mu = estimate.population_gloss(stats.norm.cdf(x), ess=ess, seed=0)["mu"]
         q = np.quantile(mu, [0.05, 0.95])
         assert q[1] - q[0] > 0.7, (seed, q)
+
+
+def test_population_of_facets_pinned_at_the_bounds():
+    # facets pinned at gamma 0 and 1 (sd 1e-4) and at 0.5: the Beta masses of far
+    # bins underflow, and rounding once made them negative (NaN probabilities);
+    # the population must still be a proper posterior, wide where facets disagree
+    rng = np.random.default_rng(0)
+    low = np.abs(1e-4 * rng.standard_normal(4000))
+    g = np.stack([low, 1 - low[::-1], 0.5 + 1e-4 * rng.standard_normal(4000), np.zeros(4000)])
+    mu = estimate.population_gloss(g, seed=0)["mu"]
+    assert np.all(np.isfinite(mu))
+    q = np.quantile(mu, [0.05, 0.95])
+    assert q[1] - q[0] > 0.3, q  # facets at 0, 0.5 and 1: a broad population
