@@ -29,20 +29,17 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._thirdparty import arviz
-
 __all__ = ["main"]
 
 
 def _demo(args: argparse.Namespace) -> int:
     """The main job on the built-in default sequence (see module docstring)."""
-    import json
     import time
 
     from . import baseline, bundle, estimate, reflectance, report, sequences
 
     t0 = time.perf_counter()
-    out = Path(args.out)
+    out = estimate.check_result_folder(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cfg = sequences.SequenceConfig(
         name="demo",
@@ -69,8 +66,7 @@ def _demo(args: argparse.Namespace) -> int:
         "baseline": base.to_json(),
         "truth (scoring only)": {"gloss": b.truth["gloss"]},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    res.idata.to_netcdf(str(out / "posterior.nc"))
+    estimate.write_result(out, estimate.EstimateResult(res.idata, summary, res.samples))
     from . import compare
 
     cmp = compare.compare_bundle_quick(
@@ -222,6 +218,8 @@ def _estimate(args: argparse.Namespace) -> int:
 
     if len(args.bundle) > 1 or args.scheduler:
         return _estimate_many(args, progress)
+    if args.out:  # a bad --out is said before the computation, not after
+        estimate.check_result_folder(args.out)
     res = estimate.estimate_bundle(
         args.bundle[0],
         illumination=args.sky,
@@ -235,10 +233,7 @@ def _estimate(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(file=sys.stderr)
     if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        res.idata.to_netcdf(str(out / "posterior.nc"))
-        (out / "summary.json").write_text(json.dumps(res.summary, indent=2))
+        estimate.write_result(args.out, res)
     if args.json:
         print(json.dumps(res.summary, indent=2))
         return 0
@@ -340,33 +335,19 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> int:
     """The one-page posterior report of a saved estimate (``estimate --out``)."""
-    import json
 
     from . import baseline, estimate, report
     from . import bundle as bundle_io
 
     result = Path(args.result)
-    summary_path, nc_path = result / "summary.json", result / "posterior.nc"
-    for p in (summary_path, nc_path):
-        if not p.exists():
-            raise FileNotFoundError(
-                f"result '{result}': no {p.name} (made by `bayesgloss estimate BUNDLE --out DIR`)"
-            )
-    summary = json.loads(summary_path.read_text())
-    facets = summary.get("facets") if isinstance(summary, dict) else None
-    if not facets or not any(f.get("gamma") for f in facets if isinstance(f, dict)):
-        raise ValueError(
-            f"result '{result}': summary.json holds no facet posterior to report "
-            "(no facet had enough usable frames)"
-        )
-    b = bundle_io.read_bundle(args.bundle or summary["bundle"])
-    idata = arviz().from_netcdf(str(nc_path))
+    res = estimate.read_result(result)
+    b = bundle_io.read_bundle(args.bundle or res.summary["bundle"])
     comparison = (
         (result / "comparison.txt").read_text() if (result / "comparison.txt").exists() else None
     )
     out = report.posterior_report(
         b,
-        estimate.EstimateResult(idata, summary, None),
+        res,
         baseline.bundle_peak_frame_gloss(b),
         Path(args.out) if args.out else result / "report.png",
         comparison=comparison,

@@ -17,7 +17,7 @@ Object-level gloss, beside the paper's average of facets:
   Myers & Bovy 2010, eq. 11): p(mu, kappa | data) is proportional to
   p(mu, kappa) prod_f int Beta(g; mu kappa, (1 - mu) kappa) p_f(g) dg, p_f a
   kernel density of facet f's draws with a bandwidth set by their effective
-  sample size (:func:`population_gloss`), a two-parameter density
+  sample size (:func:`bayesgloss.pooling.population_gloss`), a two-parameter density
   integrated on a grid. The object's gloss is mu. Priors: mu uniform on
   [0, 1], log kappa uniform on [log 0.5, log 1e4].
 - ``shared``: one material, all facets with the same gamma and n (and their
@@ -42,22 +42,25 @@ that :func:`bayesgloss.runner.run_units` fans out over many bundles.
 
 from __future__ import annotations
 
-import functools
 import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import special
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
 from . import likelihood as lk
 from ._thirdparty import arviz
 from .pool import process_pool
+from .pooling import population_gloss, shared_gloss
 
 __all__ = [
+    "RESULT_FILES",
+    "check_result_folder",
+    "write_result",
+    "read_result",
     "ILLUMINATION_MODELS",
     "MIN_FRAMES",
     "NoUsableData",
@@ -69,8 +72,6 @@ __all__ = [
     "estimate_bundle",
     "to_inference_data",
     "convergence",
-    "population_gloss",
-    "shared_gloss",
 ]
 
 #: Illumination models: every sky model of :func:`bayesgloss.sky.sky_models`.
@@ -197,183 +198,6 @@ def to_inference_data(
     return idata
 
 
-def population_gloss(
-    gamma_draws,
-    *,
-    ess=None,
-    seed=0,
-    n_mu: int = 299,
-    n_kappa: int = 80,
-    n_bins: int = 400,
-    max_draws: int = 1000,
-    n_out: int = 4000,
-):
-    """Hierarchical Beta population of facet gammas (module docstring).
-
-    Facet f's gammas are drawn from Beta(mu kappa, (1 - mu) kappa); its data
-    enter through its posterior of gamma under the uniform prior it was
-    sampled with, so that (Hogg, Myers & Bovy 2010, eq. 11)
-
-        p(mu, kappa | data) ~ p(mu, kappa) prod_f int Beta(g; mu kappa, (1 - mu) kappa) p_f(g) dg.
-
-    Each facet posterior p_f is a Gaussian kernel density of its draws,
-    reflected at 0 and 1, whose bandwidth follows Scott's rule with the
-    draws' *effective* sample size (h = 1.06 sd ESS^(-1/5)): a density of
-    autocorrelated draws then has no more bumps than its information
-    supports. (The earlier estimator, a mean of the Beta density over 200
-    draws, read the clumps of autocorrelated draws from 24 flat posteriors
-    as a population: intervals as narrow as 0.42 where the answer is the
-    prior's.) The integral is a sum over ``n_bins`` bins of the kernel
-    density's mass times the Beta distribution's mass in each bin, exact for
-    a density constant on the bins; so flat facet posteriors give exactly
-    the prior's likelihood, 1. The bins, and the cells of mu, are finer near
-    0 and 1 (:func:`_cell_edges`: the 400 bins about 0.004 wide in the
-    middle and 1.5e-5 at the ends, the 299 cells of mu 0.005 and 3e-5),
-    where the posteriors of matt and mirror-like facets are sharpest. The two
-    population parameters are integrated on a grid (mu in those cells,
-    under a uniform prior; log kappa uniform over [log 0.5, log 1e4]); draws
-    are taken from the grid posterior with jitter inside each cell.
-
-    Parameters
-    ----------
-    gamma_draws : array_like (F, S)
-        Posterior draws of each facet's gamma under a uniform prior (at most
-        ``max_draws`` per facet are used, evenly spaced) [-].
-    ess : array_like (F,), optional
-        Effective sample size of each facet's draws (default S: independent
-        draws) [-].
-    seed : int or Generator
-    n_mu, n_kappa : int
-        Cells of mu (finer toward 0 and 1) and nodes of log kappa.
-    n_bins : int
-        Bins of gamma on which each facet's density is integrated.
-
-    Returns
-    -------
-    dict
-        ``mu`` and ``kappa`` draws.
-    """
-    rng = np.random.default_rng(seed)
-    g = np.clip(np.asarray(gamma_draws, dtype=float), 0.0, 1.0)
-    n_f, n_s = g.shape
-    n_eff = np.full(n_f, float(n_s)) if ess is None else np.asarray(ess, dtype=float)
-    n_eff = np.clip(np.nan_to_num(n_eff, nan=2.0), 2.0, n_s)
-    h = np.maximum(1.06 * np.std(g, axis=1) * n_eff ** (-0.2), 1e-6)
-    if n_s > max_draws:
-        g = g[:, np.linspace(0, n_s - 1, max_draws).round().astype(int)]
-    edges = _cell_edges(n_bins)
-    mass = np.empty((n_f, n_bins))
-    for f in range(n_f):  # one facet at a time bounds memory (draws x bins)
-        x = g[f]
-        cdf = sum(
-            special.ndtr((edges[:, None] - r[None, :]) / h[f]) for r in (x, -x, 2.0 - x)
-        ).mean(axis=1)  # reflected kernels: the mass below each edge
-        mass[f] = np.maximum(np.diff(cdf), 0.0)  # rounding can make far tails negative
-    mass /= mass.sum(axis=1, keepdims=True)
-    lkap, beta_mass = _beta_bin_masses(n_mu, n_kappa, n_bins)  # (n_mu n_kappa, n_bins)
-    density = mass.T / np.diff(edges)[:, None]  # (n_bins, F)
-    with np.errstate(divide="ignore"):
-        logp = np.log(beta_mass @ density).sum(axis=1).reshape(n_mu, n_kappa)
-    mu_edges = _cell_edges(n_mu)
-    logp += np.log(np.diff(mu_edges))[:, None]  # uniform prior: each mu cell's width
-    w = np.exp(logp - logp.max()).ravel()
-    w /= w.sum()
-    pick = rng.choice(len(w), size=n_out, p=w)
-    i, j = np.unravel_index(pick, (n_mu, n_kappa))
-    dk = lkap[1] - lkap[0]
-    mu_s = mu_edges[i] + np.diff(mu_edges)[i] * rng.random(n_out)
-    k_s = np.exp(lkap[j] + dk * (rng.random(n_out) - 0.5))
-    return {"mu": mu_s, "kappa": k_s}
-
-
-def _cell_edges(n: int) -> np.ndarray:
-    """Edges of n cells of [0, 1], equal in u for gamma = sin^2(pi u / 2): about
-    pi / 2n wide in the middle and (pi / 2n)^2 at 0 and 1, where the posteriors
-    of matt and mirror-like facets pile up (n + 1,)."""
-    return np.sin(0.5 * np.pi * np.linspace(0.0, 1.0, n + 1)) ** 2
-
-
-@functools.lru_cache(maxsize=4)
-def _beta_bin_masses(n_mu: int, n_kappa: int, n_bins: int):
-    """log kappa grid (n_kappa,) and the mass of Beta(mu kappa, (1 - mu) kappa)
-    in each of the ``n_bins`` cells of :func:`_cell_edges`, (n_mu n_kappa,
-    n_bins), mu at the centres (in u) of ``n_mu`` such cells (cached: the
-    same for every object)."""
-    mu = np.sin(0.5 * np.pi * (np.arange(n_mu) + 0.5) / n_mu) ** 2
-    lkap = np.linspace(np.log(0.5), np.log(1e4), n_kappa)
-    kap = np.exp(lkap)
-    a = (mu[:, None] * kap[None, :]).ravel()
-    b = ((1 - mu)[:, None] * kap[None, :]).ravel()
-    edges = _cell_edges(n_bins)
-    cdf = special.betainc(a[:, None], b[:, None], edges[None, :])
-    # float32 halves the table (n_mu n_kappa x n_bins); the log likelihood it
-    # gives errs by ~1e-7 relative, far below the grid's cell-to-cell range
-    masses = np.maximum(np.diff(cdf, axis=1), 0.0).astype(np.float32)  # rounding: far tails < 0
-    masses.flags.writeable = False
-    lkap.flags.writeable = False
-    return lkap, masses
-
-
-def shared_gloss(
-    draws, priors: lk.Priors, *, n_gamma: int = 201, n_logn: int = 93, max_draws: int = 500
-):
-    """One material for all facets: posterior of (gamma, log n) on a grid.
-
-    Each facet's marginal posterior of (gamma, log n) is estimated by a
-    Gaussian kernel density of its draws (Scott's bandwidth, reflected at
-    the bounds); the shared posterior is their product divided by the prior
-    F - 1 times (the prior is uniform, so it is the plain product).
-
-    Parameters
-    ----------
-    draws : array_like (F, S, 2)
-        Draws of (gamma, log n) per facet.
-
-    Returns
-    -------
-    dict
-        ``gamma`` grid and its marginal density, ``log_n`` grid and its
-        marginal, and the median and 5/95 % quantiles of gamma.
-    """
-    d = np.asarray(draws, dtype=float)
-    if d.shape[1] > max_draws:  # evenly spaced draws bound the kernel sums' cost
-        d = d[:, np.linspace(0, d.shape[1] - 1, max_draws).round().astype(int)]
-    gx = np.linspace(0, 1, n_gamma)
-    nx = np.linspace(*priors.log_n, n_logn)
-    log_post = np.zeros((n_gamma, n_logn))
-    for f in range(len(d)):
-        x, y = d[f, :, 0], d[f, :, 1]
-        n = len(x)
-        hx = max(1.06 * np.std(x) * n ** (-1 / 6), 0.5 * (gx[1] - gx[0]))
-        hy = max(1.06 * np.std(y) * n ** (-1 / 6), 0.5 * (nx[1] - nx[0]))
-        # product kernels reflected at the bounds of gamma and of log n: the
-        # sum over the 3 x 3 reflections factorises, draw by draw
-        kx = sum(np.exp(-0.5 * ((gx[:, None] - rx) / hx) ** 2) for rx in (x, -x, 2 - x))
-        ky = sum(
-            np.exp(-0.5 * ((nx[:, None] - ry) / hy) ** 2)
-            for ry in (y, 2 * priors.log_n[0] - y, 2 * priors.log_n[1] - y)
-        )
-        dens = kx @ ky.T
-        log_post += np.log(dens + 1e-300)
-    post = np.exp(log_post - log_post.max())
-    pg = post.sum(axis=1)
-    pg /= pg.sum()
-    cdf = np.cumsum(pg)
-    q = [float(np.interp(v, cdf, gx)) for v in (0.05, 0.5, 0.95)]
-    pn = post.sum(axis=0)
-    pn /= pn.sum()
-    return {
-        "gamma": gx,
-        "gamma_density": pg,
-        "log_n": nx,
-        "log_n_density": pn,
-        "q05": q[0],
-        "median": q[1],
-        "q95": q[2],
-        "n_median": float(np.exp(np.interp(0.5, np.cumsum(pn), nx))),
-    }
-
-
 def _quantiles(x) -> dict:
     """Median, 5 and 95 % quantiles, and the 90 % highest-density interval.
 
@@ -493,7 +317,7 @@ def estimate_bundle(
         "noise": noise,
         "camera": camera,
         "unit": curves.unit,
-        "bundle": str(b.path),
+        "bundle": str(Path(b.path).resolve()),
         "sampler": {"seconds": samples.seconds, "median_steps": float(np.median(samples.n_steps))},
     }
     return EstimateResult(idata, summary, samples)
@@ -528,3 +352,113 @@ def estimate_unit(
         data = nc.read_bytes()
     summary = {**res.summary, "bundle": str(bundle)}
     return {"summary.json": json.dumps(summary, indent=2).encode(), "posterior.nc": data}
+
+
+# --------------------------------------------------------------------------
+# a result folder: written as one set, read back with its pairing checked
+
+#: Files of a result folder: written by :func:`write_result` (the first two)
+#: and by the report and the demo (the others), removed together.
+RESULT_FILES = ("summary.json", "posterior.nc", "report.png", "comparison.txt")
+
+
+def check_result_folder(path) -> Path:
+    """``path`` as a result folder, checked before any computation: it or its
+    nearest existing parent must be a writable folder.
+
+    Raises
+    ------
+    ValueError
+        Naming the path and the problem.
+    """
+    import os
+
+    out = Path(path)
+    for p in (out, *out.parents):
+        if not p.exists():
+            continue
+        if not p.is_dir():
+            where = "is a file" if p == out else f"lies under the file '{p}'"
+            raise ValueError(f"result folder '{out}' {where}, not a folder")
+        if not os.access(p, os.W_OK):
+            raise ValueError(f"result folder '{out}': '{p}' is not writable")
+        break
+    return out
+
+
+def write_result(path, result: EstimateResult) -> Path:
+    """Write ``summary.json`` and ``posterior.nc`` into folder ``path`` as one set.
+
+    The summary records the SHA-256 of the netCDF it goes with. The files
+    of an older result (:data:`RESULT_FILES`) are removed first, the summary
+    first of all, and each new file is written under a temporary name and
+    renamed into place, the summary last: a run killed at any moment leaves
+    either no summary (an incomplete result, which :func:`read_result`
+    says) or a summary whose netCDF is complete; no file of an older run
+    survives beside a newer one. Other files in the folder are left alone.
+    """
+    import hashlib
+    import os
+
+    out = check_result_folder(path)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in RESULT_FILES:  # the summary first: it marks a complete result
+        (out / name).unlink(missing_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".posterior.", suffix=".nc", dir=out)
+    os.close(fd)
+    try:
+        result.idata.to_netcdf(tmp)
+        digest = hashlib.sha256(Path(tmp).read_bytes()).hexdigest()
+        os.replace(tmp, out / "posterior.nc")
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    summary = {**result.summary, "posterior_sha256": digest}
+    fd, tmp = tempfile.mkstemp(prefix=".summary.", suffix=".json", dir=out)
+    with os.fdopen(fd, "w") as f:
+        f.write(json.dumps(summary, indent=2))
+    os.replace(tmp, out / "summary.json")
+    return out
+
+
+def read_result(path) -> EstimateResult:
+    """The result of :func:`write_result` in folder ``path``, checked.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and the problem: missing or unreadable files, a
+        summary that is not a result's, a netCDF that is not the one the
+        summary was written with (an interrupted or mixed run).
+    """
+    import hashlib
+
+    folder = Path(path)
+    made_by = "(made by `bayesgloss estimate BUNDLE --out DIR`)"
+    summary_path, nc_path = folder / "summary.json", folder / "posterior.nc"
+    for p in (summary_path, nc_path):
+        if not p.is_file():
+            raise ValueError(f"result '{folder}': no {p.name}: an incomplete result {made_by}")
+    try:
+        summary = json.loads(summary_path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"result '{folder}': summary.json is not JSON: {err}") from None
+    if not isinstance(summary, dict) or not isinstance(summary.get("facets"), list):
+        raise ValueError(f"result '{folder}': summary.json holds no estimate {made_by}")
+    if not any(isinstance(f, dict) and f.get("gamma") for f in summary["facets"]):
+        raise ValueError(
+            f"result '{folder}': summary.json holds no facet posterior to report "
+            "(no facet had enough usable frames)"
+        )
+    data = nc_path.read_bytes()
+    want = summary.get("posterior_sha256")
+    if want is not None and hashlib.sha256(data).hexdigest() != want:
+        raise ValueError(
+            f"result '{folder}': posterior.nc is not the one summary.json was written with "
+            "(an interrupted or mixed run): run the estimate again"
+        )
+    try:
+        idata = arviz().from_netcdf(str(nc_path))
+        idata.posterior["gamma"].values  # noqa: B018 - read now, fail here
+    except Exception as err:  # any reader error: the file is not a posterior
+        raise ValueError(f"result '{folder}': posterior.nc is unreadable: {err}") from None
+    return EstimateResult(idata, summary, None)

@@ -5,7 +5,7 @@ Not library code: the studies' scripts import it, nothing in ``bayesgloss``
 does. Every study simulates (or renders) one object per condition, a set of
 facets of the paper hemisphere made of one material (gamma, n), and puts the
 posterior object gloss (the hierarchical population mean of
-:func:`bayesgloss.estimate.population_gloss`) beside the paper's peak-frame
+:func:`bayesgloss.pooling.population_gloss`) beside the paper's peak-frame
 baseline (mean over sunlit facets, :func:`bayesgloss.baseline.peak_frame_gloss`).
 
 Every study cuts its work into units (one object, or a few fitted together)
@@ -35,7 +35,17 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesgloss import baseline, diagnostics, estimate, render, runner, sampling, scene, sky, sun
+from bayesgloss import (
+    baseline,
+    diagnostics,
+    pooling,
+    render,
+    runner,
+    sampling,
+    scene,
+    sky,
+    sun,
+)
 from bayesgloss import likelihood as lk
 
 STUDIES = Path(__file__).resolve().parent
@@ -297,7 +307,7 @@ def fit_groups(
     out, lo = [], 0
     for g, pop_seed in zip(groups, pop_seeds, strict=True):
         hi = lo + len(g["y"])
-        pop = estimate.population_gloss(
+        pop = pooling.population_gloss(
             gam[lo:hi],
             ess=ess[lo:hi],
             seed=seed_int(pop_seed),

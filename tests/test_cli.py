@@ -171,3 +171,78 @@ def test_readme_command_table_is_the_command_line(capsys):
             cli.main([command, "--help"])
         assert stop.value.code == 0
         assert f"usage: bayesgloss {command}" in capsys.readouterr().out
+
+
+# -- result folders: checked first, written as one set, read back checked ---------
+
+
+@pytest.mark.parametrize("where", ["a file", "under a file"])
+def test_bad_out_is_said_before_any_work(odd_bundles, tmp_path, monkeypatch, capsys, where):
+    # an --out that cannot be a folder is refused before the sampler runs (it
+    # used to fail after the whole computation)
+    from bayesgloss import estimate
+
+    def never(*args, **kwargs):
+        raise AssertionError("the estimate ran before --out was checked")
+
+    monkeypatch.setattr(estimate, "estimate_bundle", never)
+    blocker = tmp_path / "taken"
+    blocker.write_text("a user's file")
+    out = blocker if where == "a file" else blocker / "result"
+    assert cli.main(["estimate", str(odd_bundles["day"]), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a folder" in err and str(blocker) in err, err
+    assert blocker.read_text() == "a user's file"
+
+
+def test_estimate_out_is_written_as_one_set(odd_bundles, tmp_path, capsys):
+    # an older run's files do not survive beside the new ones (report once drew
+    # an old comparison into a new figure); other files of the folder stay; the
+    # summary names the bundle by its resolved path and the netCDF it goes with
+    import hashlib
+
+    out = tmp_path / "res"
+    out.mkdir()
+    for name in ("summary.json", "posterior.nc", "report.png", "comparison.txt"):
+        (out / name).write_text("from an older run")
+    (out / "notes.txt").write_text("mine")
+    day = odd_bundles["day"]
+    args = ["estimate", str(day), "--out", str(out), "--quiet", "--max-steps", "100", "--jobs", "1"]
+    assert cli.main(args) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "posterior.nc", "summary.json"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["bundle"] == str(Path(day).resolve())
+    digest = hashlib.sha256((out / "posterior.nc").read_bytes()).hexdigest()
+    assert summary["posterior_sha256"] == digest
+
+
+@pytest.fixture(scope="module")
+def saved_result(odd_bundles, tmp_path_factory):
+    out = tmp_path_factory.mktemp("saved") / "res"
+    args = ["estimate", str(odd_bundles["day"]), "--out", str(out), "--quiet", "--max-steps", "100"]
+    assert cli.main([*args, "--jobs", "1"]) == 0
+    return out
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (
+            lambda d: (d / "posterior.nc").write_bytes((d / "posterior.nc").read_bytes()[:96]),
+            "not the one",
+        ),
+        (lambda d: (d / "posterior.nc").unlink(), "no posterior.nc: an incomplete result"),
+        (lambda d: (d / "summary.json").unlink(), "no summary.json: an incomplete result"),
+        (lambda d: (d / "summary.json").write_text("[]"), "summary.json holds no estimate"),
+        (lambda d: (d / "summary.json").write_text("{tru"), "summary.json is not JSON"),
+    ],
+    ids=["truncated-netcdf", "no-netcdf", "no-summary", "summary-list", "summary-garbage"],
+)
+def test_report_of_a_damaged_result_is_one_line(saved_result, tmp_path, capsys, damage, message):
+    # what a killed or tampered run leaves: report says so in one line, exit 2
+    res = tmp_path / "res"
+    shutil.copytree(saved_result, res)
+    damage(res)
+    assert cli.main(["report", str(res)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err, err
