@@ -335,7 +335,6 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> int:
     """The one-page posterior report of a saved estimate (``estimate --out``)."""
-
     from . import baseline, estimate, report
     from . import bundle as bundle_io
 

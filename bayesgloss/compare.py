@@ -290,7 +290,7 @@ def bundle_models(
 
     Facets with fewer than ``min_frames`` usable frames are left out (the
     same facets for every model); a bundle in which no facet has them is
-    rejected (:class:`bayesgloss.estimate.NoUsableData`).
+    rejected (:class:`bayesgloss.bundle.NoUsableData`).
 
     Parameters
     ----------
@@ -310,7 +310,7 @@ def bundle_models(
     b = b if isinstance(b, bundle_io.Bundle) else bundle_io.read_bundle(b)
     curves = bundle_io.facet_curves(b)
     y, usable, censored = estimate.observations(curves)
-    keep = estimate.usable_facets(b, usable, min_frames)
+    keep = bundle_io.usable_facets(b, usable, min_frames)
     models = {}
     for ill in illumination:
         phong = estimate.bundle_bases(b, ill)
@@ -382,18 +382,16 @@ class ModelFit:
 
 def _converged(draws, tau, n_steps, multiple) -> np.ndarray:
     """The rule of :mod:`bayesgloss.diagnostics` per problem, draws (B, E, S, P)."""
-    b, e, s, p = draws.shape
-    by_parameter = diagnostics.converged(draws.transpose(0, 3, 1, 2).reshape(b * p, e, s))
-    long = diagnostics.long_enough(n_steps, np.reshape(tau, (b, -1)), multiple)
-    return long & np.all(by_parameter.reshape(b, p), axis=-1)
+    return _diagnosed(draws, tau, n_steps, multiple)[1]
 
 
-def _rhat(draws) -> np.ndarray:
-    """Rank-normalised R-hat of every parameter, draws (B, E, S, P) -> (B, P)."""
+def _diagnosed(draws, tau, n_steps, multiple) -> tuple[np.ndarray, np.ndarray]:
+    """R-hat of every parameter (B, P) and the rule per problem (B,), draws (B, E, S, P)."""
     b, e, s, p = draws.shape
-    x = draws.transpose(0, 3, 1, 2).reshape(b * p, e, s)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return diagnostics.rank_diagnostics(x)[0].reshape(b, p)
+        rhat, _, _, met = diagnostics.diagnose(draws.transpose(0, 3, 1, 2).reshape(b * p, e, s))
+    long = diagnostics.long_enough(n_steps, np.reshape(tau, (b, -1)), multiple)
+    return rhat.reshape(b, p), long & np.all(met.reshape(b, p), axis=-1)
 
 
 def fit_model(
@@ -450,7 +448,8 @@ def fit_model(
     while True:
         tau = diagnostics.integrated_time(chain).reshape(e, b, p).transpose(1, 0, 2)
         d = thinned(chain)
-        if len(chain) >= max_steps or np.all(_converged(d, tau, len(chain), min_tau_multiple)):
+        rhat, done = _diagnosed(d, tau, len(chain), min_tau_multiple)
+        if len(chain) >= max_steps or np.all(done):
             break
         more, lp_more, _ = ens.run(chain[-1], min(steps, max_steps - len(chain)), lps[-1])
         chain, lps = np.concatenate([chain, more]), np.concatenate([lps, lp_more])
@@ -461,7 +460,7 @@ def fit_model(
         valid = np.ones((b, ll.shape[-1]), dtype=bool)
     else:
         valid = model.data.valid
-    return ModelFit(model, d, ll, valid, _rhat(d), tau, len(chain), min_tau_multiple)
+    return ModelFit(model, d, ll, valid, rhat, tau, len(chain), min_tau_multiple)
 
 
 def model_evidence(

@@ -11,7 +11,8 @@ the model fits of :mod:`bayesgloss.compare`) and every summary
    :data:`RHAT_MAX` (1.01) and bulk and tail effective sample sizes of at
    least :data:`ESS_MIN` (400) over the independent chains (Vehtari et al.
    2021, "Rank-normalization, folding, and localization", Bayesian Analysis
-   16; ArviZ's thresholds; :func:`converged`).
+   16; ArviZ's thresholds; :func:`converged`, and :func:`diagnose` with
+   the statistics beside it).
 
 :func:`rank_diagnostics` computes ArviZ's R-hat and ESS arithmetic
 vectorised over many parameters (tests compare it with ``arviz.rhat`` and
@@ -30,6 +31,7 @@ __all__ = [
     "fast_length",
     "long_enough",
     "converged",
+    "diagnose",
     "rank_diagnostics",
 ]
 
@@ -120,10 +122,10 @@ def long_enough(n_steps, tau, multiple: float = 50.0) -> np.ndarray:
     return np.asarray(n_steps) >= multiple * t_max
 
 
-def converged(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN) -> np.ndarray:
-    """The convergence rule for many parameters at once: rank-normalised
-    R-hat < 1.01 and bulk and tail ESS >= 400 (Vehtari et al. 2021, sec. 4.3,
-    ArviZ's defaults).
+def diagnose(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN):
+    """The convergence rule for many parameters at once, with its statistics:
+    rank-normalised R-hat < 1.01 and bulk and tail ESS >= 400 (Vehtari et al.
+    2021, sec. 4.3, ArviZ's defaults).
 
     Parameters
     ----------
@@ -132,16 +134,26 @@ def converged(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN) -> np
 
     Returns
     -------
-    ndarray (F,) of bool
-        False where a draw is not finite or all draws are equal.
+    rhat, ess_bulk, ess_tail : ndarray (F,)
+        :func:`rank_diagnostics`; NaN where a draw is not finite or all
+        draws are equal.
+    converged : ndarray (F,) of bool
+        Whether the rule holds (False where the statistics are NaN).
     """
     x = np.asarray(draws, dtype=float)
     ok = np.isfinite(x).all(axis=(1, 2)) & (np.ptp(x, axis=(1, 2)) > 0)
-    if not ok.any():
-        return ok
-    rhat, ess_bulk, ess_tail = rank_diagnostics(x[ok])
-    ok[ok] = (rhat < rhat_max) & (ess_bulk >= ess_min) & (ess_tail >= ess_min)
-    return ok
+    stats = np.full((3, len(x)), np.nan)
+    if ok.any():
+        stats[:, ok] = rank_diagnostics(x[ok])
+    rhat, ess_bulk, ess_tail = stats
+    with np.errstate(invalid="ignore"):
+        met = (rhat < rhat_max) & (ess_bulk >= ess_min) & (ess_tail >= ess_min)
+    return rhat, ess_bulk, ess_tail, met
+
+
+def converged(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN) -> np.ndarray:
+    """Whether the rule of :func:`diagnose` holds, (F,) of bool, for draws (F, C, S)."""
+    return diagnose(draws, rhat_max, ess_min)[3]
 
 
 def rank_diagnostics(draws):

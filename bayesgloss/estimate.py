@@ -34,10 +34,13 @@ skies; the 15 CIE general skies; Perez).
 
 A facet needs at least :data:`MIN_FRAMES` usable frames; a bundle in which
 no facet has them (every frame at night, a single frame) is rejected with
-:class:`NoUsableData`, which says how many frames have the sun up.
+:class:`bayesgloss.bundle.NoUsableData`, which says how many frames have
+the sun up.
 
-:func:`estimate_unit` is one bundle's estimate as files, the unit of work
-that :func:`bayesgloss.runner.run_units` fans out over many bundles.
+:func:`estimate_unit` is one bundle's estimate as files
+(:func:`result_files`), the unit of work that
+:func:`bayesgloss.runner.run_units` fans out over many bundles;
+:func:`write_result` and :func:`read_result` write and read a result folder.
 """
 
 from __future__ import annotations
@@ -59,12 +62,11 @@ from .pooling import population_gloss, shared_gloss
 __all__ = [
     "RESULT_FILES",
     "check_result_folder",
+    "result_files",
     "write_result",
     "read_result",
     "ILLUMINATION_MODELS",
     "MIN_FRAMES",
-    "NoUsableData",
-    "usable_facets",
     "estimate_unit",
     "bundle_bases",
     "observations",
@@ -78,9 +80,6 @@ __all__ = [
 ILLUMINATION_MODELS = sky.sky_models()
 #: Usable frames a facet's curve needs at least.
 MIN_FRAMES = 4
-
-
-NoUsableData = bundle_io.NoUsableData
 
 
 def bundle_bases(
@@ -120,12 +119,6 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.where(usable, y, 0.0), usable, censored
 
 
-def usable_facets(b, usable, min_frames: int = MIN_FRAMES) -> np.ndarray:
-    """Facets with at least ``min_frames`` usable frames
-    (:func:`bayesgloss.bundle.usable_facets`)."""
-    return bundle_io.usable_facets(b, usable, min_frames)
-
-
 @dataclass
 class EstimateResult:
     """What :func:`estimate_bundle` found."""
@@ -139,8 +132,7 @@ def convergence(idata) -> dict:
     """R-hat and bulk/tail ESS of gamma per facet, and whether each converged
     (the rule of :mod:`bayesgloss.diagnostics`)."""
     gamma = np.moveaxis(idata.posterior["gamma"].values, -1, 0)  # (F, E, S)
-    rhat, ess_bulk, ess_tail = diagnostics.rank_diagnostics(gamma)
-    ok = diagnostics.converged(gamma)
+    rhat, ess_bulk, ess_tail, ok = diagnostics.diagnose(gamma)
     return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail, "converged": ok}
 
 
@@ -249,7 +241,7 @@ def estimate_bundle(
 
     Raises
     ------
-    NoUsableData
+    bayesgloss.bundle.NoUsableData
         Where no facet has :data:`MIN_FRAMES` usable frames.
     """
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
@@ -257,7 +249,7 @@ def estimate_bundle(
     if camera == "auto":
         camera = "linear" if b.response_known else "power"
     y, usable, censored = observations(curves)
-    keep = usable_facets(b, usable)
+    keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
     bases = bundle_bases(b, illumination)
     sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
     data = lk.curve_data(
@@ -346,12 +338,7 @@ def estimate_unit(
         jobs=1,
         sampler_options={"max_steps": max_steps},
     )
-    with tempfile.TemporaryDirectory() as tmp:
-        nc = Path(tmp) / "posterior.nc"
-        res.idata.to_netcdf(str(nc))
-        data = nc.read_bytes()
-    summary = {**res.summary, "bundle": str(bundle)}
-    return {"summary.json": json.dumps(summary, indent=2).encode(), "posterior.nc": data}
+    return result_files(res)
 
 
 # --------------------------------------------------------------------------
@@ -386,37 +373,46 @@ def check_result_folder(path) -> Path:
     return out
 
 
-def write_result(path, result: EstimateResult) -> Path:
-    """Write ``summary.json`` and ``posterior.nc`` into folder ``path`` as one set.
-
-    The summary records the SHA-256 of the netCDF it goes with. The files
-    of an older result (:data:`RESULT_FILES`) are removed first, the summary
-    first of all, and each new file is written under a temporary name and
-    renamed into place, the summary last: a run killed at any moment leaves
-    either no summary (an incomplete result, which :func:`read_result`
-    says) or a summary whose netCDF is complete; no file of an older run
-    survives beside a newer one. Other files in the folder are left alone.
-    """
+def result_files(result: EstimateResult) -> dict[str, bytes]:
+    """A result as the bytes of its files: ``posterior.nc`` (the InferenceData)
+    and ``summary.json``, which records the netCDF's SHA-256 so that
+    :func:`read_result` can tell it belongs to that summary."""
     import hashlib
+
+    with tempfile.TemporaryDirectory() as tmp:
+        nc = Path(tmp) / "posterior.nc"
+        result.idata.to_netcdf(str(nc))
+        data = nc.read_bytes()
+    summary = {**result.summary, "posterior_sha256": hashlib.sha256(data).hexdigest()}
+    return {"posterior.nc": data, "summary.json": json.dumps(summary, indent=2).encode()}
+
+
+def write_result(path, result: EstimateResult) -> Path:
+    """Write ``summary.json`` and ``posterior.nc`` (:func:`result_files`) into
+    folder ``path`` as one set.
+
+    The files of an older result (:data:`RESULT_FILES`) are removed first,
+    the summary first of all, and each new file is written under a temporary
+    name and renamed into place, the summary last: a run killed at any
+    moment leaves either no summary (an incomplete result, which
+    :func:`read_result` says) or a summary whose netCDF is complete; no file
+    of an older run survives beside a newer one. Other files in the folder
+    are left alone.
+    """
     import os
 
     out = check_result_folder(path)
     out.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # the summary first: it marks a complete result
         (out / name).unlink(missing_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".posterior.", suffix=".nc", dir=out)
-    os.close(fd)
-    try:
-        result.idata.to_netcdf(tmp)
-        digest = hashlib.sha256(Path(tmp).read_bytes()).hexdigest()
-        os.replace(tmp, out / "posterior.nc")
-    finally:
-        Path(tmp).unlink(missing_ok=True)
-    summary = {**result.summary, "posterior_sha256": digest}
-    fd, tmp = tempfile.mkstemp(prefix=".summary.", suffix=".json", dir=out)
-    with os.fdopen(fd, "w") as f:
-        f.write(json.dumps(summary, indent=2))
-    os.replace(tmp, out / "summary.json")
+    for name, data in result_files(result).items():  # the netCDF, then the summary
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.replace(tmp, out / name)
+        finally:
+            Path(tmp).unlink(missing_ok=True)
     return out
 
 

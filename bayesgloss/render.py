@@ -53,8 +53,9 @@ When the geometry names an occluder (:attr:`ViewGeometry.occluder`), ground
 points in the object's shadow (:func:`ground_shadow`) lose the sun's share
 rho_g E_sun,h / pi: the glossy, Ward and mirror terms at each of their
 incident directions, the diffuse basis as a correction on a coarser grid
-(:data:`SHADOW_RESOLUTION`). ``ground="sky"``: the sky model's own value below the horizon (gensky's
-and gendaylit's ground glow, as in a Radiance scene with no ground plane).
+(:data:`SHADOW_RESOLUTION`). ``ground="sky"``: the sky model's own value
+below the horizon (gensky's and gendaylit's ground glow, as in a Radiance
+scene with no ground plane).
 
 Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 """
