@@ -5,6 +5,7 @@ flat facets standing on a ground plane at the origin of the world frame
 (x east, y north, z up, metres). The paper does not give its tessellation;
 :func:`tessellated_hemisphere` builds rings of planar quadrilaterals (each an
 isosceles trapezoid, hence exactly planar) capped by a fan of triangles.
+Other shapes: a :func:`box` and a brilliant-cut-like convex :func:`gem`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ __all__ = [
     "Facets",
     "tessellated_hemisphere",
     "box",
+    "gem",
     "view_directions",
     "CAMERA_AZIMUTHS",
     "camera_position",
@@ -160,6 +162,107 @@ def box(size=(1.0, 1.0, 1.0), azimuth: float = 0.0, center=(0.0, 0.0, 0.0)) -> F
     polygons = [np.array([rot @ corners[v] for v in f]) + c for f in faces]
     normals, centers = zip(*(_polygon_normal_centroid(p) for p in polygons), strict=True)
     return Facets(np.arange(1, 6), np.array(normals), np.array(centers), polygons)
+
+
+def _ring(radius: float, z: float, n_sides: int, offset_rad: float) -> np.ndarray:
+    """Vertices (n_sides, 3) of a regular polygon at height z, the first at offset_rad."""
+    a = offset_rad + np.arange(n_sides) * (2 * np.pi / n_sides)
+    return np.column_stack([radius * np.cos(a), radius * np.sin(a), np.full(n_sides, z)])
+
+
+def _band(ring: np.ndarray, turned: np.ndarray) -> list[np.ndarray]:
+    """Triangles of the convex hull between two parallel rings turned half a step.
+
+    ``turned[k]`` lies half a step after ``ring[k]`` in angle: each edge of
+    ``ring`` with the vertex of ``turned`` over its middle, and each edge of
+    ``turned`` with the vertex of ``ring`` over its middle (the sides of an
+    antiprism frustum).
+    """
+    n = len(ring)
+    tris = []
+    for k in range(n):
+        tris.append(np.array([ring[k], ring[(k + 1) % n], turned[k]]))
+        tris.append(np.array([turned[k], ring[(k + 1) % n], turned[(k + 1) % n]]))
+    return tris
+
+
+def _outward(polygons: list[np.ndarray]) -> Facets:
+    """Facets of a convex solid, each polygon ordered so its normal points outward."""
+    inside = np.mean(np.concatenate(polygons), axis=0)  # inside a convex solid
+    out = []
+    for p in polygons:
+        normal, centroid = _polygon_normal_centroid(p)
+        out.append(p if np.dot(centroid - inside, normal) > 0 else p[::-1].copy())
+    normals, centers = zip(*(_polygon_normal_centroid(p) for p in out), strict=True)
+    return Facets(np.arange(1, len(out) + 1), np.array(normals), np.array(centers), out)
+
+
+def gem(
+    radius: float = 1.0,
+    n_sides: int = 8,
+    stand: str = "culet",
+    azimuth: float = 0.0,
+    center=(0.0, 0.0, 0.0),
+) -> Facets:
+    """A brilliant-cut-like convex polyhedron of planar facets standing on the ground.
+
+    Proportions of a round brilliant (Tolkowsky, *Diamond Design*, 1919) on an
+    ``n_sides``-gon: girdle of circumradius ``radius`` and height 0.06
+    ``radius`` (3 % of the diameter), crown 0.32 ``radius`` high (16 %) up to
+    a table of circumradius 0.55 ``radius`` (55 %), pavilion 0.86 ``radius``
+    deep (43 %) down to a flat culet of circumradius 0.25 ``radius`` (large
+    enough to stand on). Table and culet are turned half a step against the
+    girdle, so crown and pavilion are bands of ``2 n_sides`` triangles each
+    (the convex hull of the two rings): every facet is planar and the solid
+    is convex.
+
+    Parameters
+    ----------
+    radius : float
+        Circumradius of the girdle [m].
+    n_sides : int
+        Sides of the girdle polygon (8: octagonal) [-].
+    stand : {"culet", "table"}
+        The face it stands on, left out like a box's bottom: ``"culet"``
+        (table up, as a gem is shown) or ``"table"`` (upside down) [-].
+    azimuth : float
+        Rotation about the vertical, clockwise seen from above [deg].
+    center : sequence of 3 float
+        Centre of the face it stands on, world frame [m].
+
+    Returns
+    -------
+    Facets
+        ``5 n_sides + 1`` facets (41 for an octagon) numbered from 1: the
+        pavilion band, the girdle, the crown band, then the top face (table,
+        or culet when standing on the table); outward normals, vertices
+        counter-clockwise seen from outside.
+    """
+    if n_sides < 3:
+        raise ValueError(f"need n_sides >= 3, got {n_sides}")
+    if not radius > 0:
+        raise ValueError(f"radius must be positive, got {radius}")
+    if stand not in ("culet", "table"):
+        raise ValueError(f"unknown stand {stand!r}; valid: culet, table")
+    r, half = float(radius), np.pi / n_sides
+    depth, girdle, crown = 0.86 * r, 0.06 * r, 0.32 * r
+    height = depth + girdle + crown
+    culet = _ring(0.25 * r, 0.0, n_sides, half)
+    low = _ring(r, depth, n_sides, 0.0)
+    high = _ring(r, depth + girdle, n_sides, 0.0)
+    table = _ring(0.55 * r, height, n_sides, half)
+    sides = [
+        np.array([low[k], low[(k + 1) % n_sides], high[(k + 1) % n_sides], high[k]])
+        for k in range(n_sides)
+    ]
+    polys = [*_band(low, culet), *sides, *_band(high, table), table]
+    if stand == "table":  # upside down, standing on the table; the culet on top
+        polys = [*polys[:-1], culet]
+        polys = [np.column_stack([p[:, :2], height - p[:, 2]]) for p in polys]
+    a = -np.radians(azimuth)  # clockwise seen from above
+    rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    c = np.asarray(center, dtype=float)
+    return _outward([p @ rot.T + c for p in polys])
 
 
 def camera_position(

@@ -19,6 +19,40 @@ facet (wholly inside); the other pixels are background (0).
 
 The sun of every frame is bayesgloss's SPA position (apparent, as the bundle
 reader computes it), handed to ``gensky -ang`` or ``gendaylit -ang``.
+
+Skies
+-----
+``gensky-*``: the real ``gensky -ang`` (clear and intermediate with sun,
+overcast, uniform). ``perez``: the real ``gendaylit -ang ... -W DNI DHI``
+with each frame's irradiances (``dni``, ``dhi``; pvlib's Ineichen-Perez
+clear sky at ``linke_turbidity`` where not given). ``cie-1`` ... ``cie-15``:
+the pyradiance build of gensky makes only the clear, intermediate,
+overcast and uniform skies (no CIE general skies, no ``-r``), so the 15 CIE
+standard general skies (ISO 15469:2004) are written as a Radiance
+``brightfunc`` of :data:`CIE_CAL` (the formula of
+:func:`bayesgloss.sky.cie_general`, evaluated by Radiance per ray) scaled
+exactly as ``bayesgloss.sky.daylight("cie-N")`` scales it (the sky's
+horizontal irradiance equals the diffuse horizontal illuminance / 179 from
+``dni``, ``dhi`` through gendaylit's efficacy models), plus a solar
+``source`` of 0.533 deg with that model's beam radiance (types 6-15; types
+1-5 have no sun) and its ground radiance below the horizon.
+
+Camera
+------
+After rendering, each frame is multiplied by its ``exposure`` gain (given,
+or "auto": inverse to the frame's mean luminance, times a log-normal
+jitter), given relative Gaussian ``sensor_noise`` (a generator seeded by the
+configuration's hash), and, for every ``pixel_encoding`` but
+``linear-radiance``, divided by the encoding's white, clipped to [0, 1]
+(highlights at the top code: saturated) and encoded (``linear``, ``srgb``,
+``gamma:G``) as 8- or 16-bit PNG. The white is ``white_scale`` times the
+99th percentile of the exposed, noise-free channel values of the frames
+with the sun up, one white for the whole sequence (a sensor's full well
+after its gain). The gains are written as ``frames[].exposure`` only for
+``linear-radiance``, where pixel = exposure x radiance; with any other
+encoding they are left out, so an estimator must treat exposure as unknown
+(the bundle spec). ``truth`` holds everything: sky, irradiances, gains,
+white, encoding, colour luminance and the true gloss.
 """
 
 from __future__ import annotations
@@ -26,6 +60,8 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
+import shutil
 import sys
 import tempfile
 import time
@@ -36,14 +72,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import geometry, radiance, reflectance, sky, sun
+from . import geometry, images, radiance, reflectance, sky, sun
 
 __all__ = [
     "SequenceConfig",
+    "SKIES",
+    "SHAPES",
+    "CIE_CAL",
     "paper_configs",
     "render_bundles",
     "camera_rays",
     "label_image",
+    "camera_response",
+    "auto_exposure",
     "DEFAULT_AMBIENT",
 ]
 
@@ -68,8 +109,64 @@ DEFAULT_AMBIENT = (
     "-u-",
 )
 
-SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast", "gensky-uniform", "perez")
-SHAPES = ("hemisphere", "box")
+#: Sky names of :class:`SequenceConfig` (``cie-N``: the CIE standard general skies).
+SKIES = (
+    "gensky-clear",
+    "gensky-intermediate",
+    "gensky-overcast",
+    "gensky-uniform",
+    "perez",
+    *(f"cie-{t}" for t in range(1, 16)),
+)
+SHAPES = ("hemisphere", "box", "gem")
+#: Integer pixel encodings and their default bit depth.
+_ENCODING_BITS = {"linear": 16, "srgb": 8, "gamma": 16}
+#: "auto" exposure: the gain is at most this many times the reference gain [-].
+AUTO_EXPOSURE_RANGE = 100.0
+
+#: Radiance function file of the CIE standard general sky (ISO 15469:2004 /
+#: CIE S 011/E:2003 eq. 3, 5 and 7), the formula of :func:`bayesgloss.sky.cie_general`.
+#: Arguments: A1 zenith radiance, A2 ground radiance [W sr^-1 m^-2], A3-A5 sun
+#: direction, A6-A10 the standard's a, b, c, d, e.
+CIE_CAL = """{ CIE standard general sky, ISO 15469:2004 eq. 7, from bayesgloss.sequences }
+{ A1 zenith radiance, A2 ground radiance, A3 A4 A5 sun direction, A6..A10 a b c d e }
+cosgamma = Dx*A3 + Dy*A4 + Dz*A5;
+chi = Acos(cosgamma);
+zsun = Acos(A5);
+gradation(cz) = 1 + if(cz, A6*Exp(A7/if(cz - 1e-9, cz, 1e-9)), 0);
+indicatrix(x) = 1 + A8*(Exp(A9*x) - Exp(A9*PI/2)) + A10*cos(x)*cos(x);
+ciesky = A1*indicatrix(chi)*gradation(Dz) / (indicatrix(zsun)*(1 + A6*Exp(A7)));
+skybright = if(Dz, ciesky, A2);
+"""
+
+#: Fields added after the first bundles were cached, with their defaults: a
+#: field at its default is left out of :meth:`SequenceConfig.key`, so the
+#: hashes (and cached bundles) of older configurations stay the same.
+_LATER_DEFAULTS = {
+    "gem_stand": "culet",
+    "gem_azimuth": 0.0,
+    "dni": None,
+    "dhi": None,
+    "exposure": None,
+    "exposure_jitter": 0.0,
+    "pixel_encoding": "linear-radiance",
+    "bit_depth": None,
+    "sensor_noise": 0.0,
+    "white_scale": 1.0,
+}
+#: Fields that change only what is done to the rendered frames, not the scene.
+_CAMERA_FIELDS = (
+    "view",
+    "camera_distance",
+    "camera_height",
+    "image_size",
+    "exposure",
+    "exposure_jitter",
+    "pixel_encoding",
+    "bit_depth",
+    "sensor_noise",
+    "white_scale",
+)
 
 
 @dataclass(frozen=True)
@@ -81,14 +178,28 @@ class SequenceConfig:
     h) on ``date``, or at ``times`` (ISO 8601 with UTC offsets) when given.
     Object: ``shape`` ("hemisphere": ``radius``, ``n_rings``, ``n_segments``;
     "box": ``box_size`` (x, y, z) m, standing on the ground, turned by
-    ``box_azimuth`` deg). Camera: ``view`` (a paper view name or bearing in
-    degrees), ``camera_distance`` and ``camera_height`` (m), square image of
-    ``image_size`` pixels framing the object. Material: Radiance ``material``
-    ("plastic" or "metal"), grey ``colour``, ``specularity``, ``roughness``.
-    Sky: ``sky`` (one of :data:`SKIES`), gensky's ``turbidity``, Perez's
-    clear-sky ``linke_turbidity``. Ground: ``ground_reflectance`` and a disc
-    of ``ground_radius`` m (beyond it, the sky description's ground glow).
-    ``ambient``: rtrace options.
+    ``box_azimuth`` deg; "gem": :func:`bayesgloss.geometry.gem` of girdle
+    radius ``radius`` m standing on ``gem_stand`` ("culet" or "table"),
+    turned by ``gem_azimuth`` deg). Camera: ``view`` (a paper view name or
+    bearing in degrees), ``camera_distance`` and ``camera_height`` (m),
+    square image of ``image_size`` pixels framing the object. Material:
+    Radiance ``material`` ("plastic" or "metal"), ``colour`` (grey float or
+    RGB triple, each in [0, 1]), ``specularity``, ``roughness``.
+    Sky: ``sky`` (one of :data:`SKIES`), gensky's ``turbidity``, the clear
+    sky's ``linke_turbidity``; for "perez" and "cie-N", per-frame ``dni`` and
+    ``dhi`` (W m^-2, one per frame; None: pvlib's clear sky). Ground:
+    ``ground_reflectance`` and a disc of ``ground_radius`` m (beyond it, the
+    sky description's ground glow). ``ambient``: rtrace options.
+
+    Camera response (applied to the rendered frames, module docstring):
+    ``exposure`` (per-frame gains [-], or "auto" with log-normal
+    ``exposure_jitter`` sd [-]), ``pixel_encoding`` ("linear-radiance",
+    "linear", "srgb" or "gamma:G"), ``bit_depth`` (8 or 16; None: 8 for
+    srgb, 16 for linear and gamma), ``sensor_noise`` (relative Gaussian sd on
+    linear values [-]), ``white_scale`` (the white, the linear value of the top
+    code, as a multiple of the sequence's 99th percentile [-]).
+    ``category``: a label for scoring sets by kind (e.g. "broken-cloud"),
+    written to ``truth``; like ``name`` it is not hashed.
     """
 
     name: str = "sequence"
@@ -118,6 +229,17 @@ class SequenceConfig:
     ground_reflectance: float = 0.2
     ground_radius: float = 20.0
     ambient: tuple = field(default=DEFAULT_AMBIENT)
+    gem_stand: str = "culet"
+    gem_azimuth: float = 0.0
+    dni: tuple | None = None
+    dhi: tuple | None = None
+    exposure: tuple | str | None = None
+    exposure_jitter: float = 0.0
+    pixel_encoding: str = "linear-radiance"
+    bit_depth: int | None = None
+    sensor_noise: float = 0.0
+    white_scale: float = 1.0
+    category: str | None = None
 
     def __post_init__(self):
         problems = []
@@ -133,12 +255,62 @@ class SequenceConfig:
             problems.append(f"material {self.material!r} not one of plastic, metal")
         if not 0 <= self.specularity <= 1:
             problems.append(f"specularity {self.specularity} outside [0, 1]")
-        if not 0 <= self.colour <= 1:
-            problems.append(f"colour {self.colour} outside [0, 1]")
+        colour = np.asarray(self.colour, dtype=float)
+        if colour.shape not in ((), (3,)) or not np.all((colour >= 0) & (colour <= 1)):
+            problems.append(f"colour {self.colour} not a float or RGB triple in [0, 1]")
         if not 8 <= self.image_size <= 4096:
             problems.append(f"image_size {self.image_size} outside [8, 4096]")
+        if self.gem_stand not in ("culet", "table"):
+            problems.append(f"gem_stand {self.gem_stand!r} not one of culet, table")
+        problems += self._frame_problems() + self._camera_problems()
         if problems:
             raise ValueError(f"sequence config {self.name!r}: " + "; ".join(problems))
+
+    def _frame_problems(self) -> list[str]:
+        n = self.n_frames
+        problems = []
+        for name in ("dni", "dhi"):
+            values = getattr(self, name)
+            if values is None:
+                continue
+            if not (self.sky == "perez" or self.sky.startswith("cie-")):
+                problems.append(f"{name} given for sky {self.sky!r} (only perez and cie-N)")
+            arr = np.asarray(values, dtype=float)
+            if arr.shape != (n,) or not np.all(np.isfinite(arr) & (arr >= 0)):
+                problems.append(f"{name} needs {n} finite values >= 0 (one a frame), got {values}")
+        if isinstance(self.exposure, str):
+            if self.exposure != "auto":
+                problems.append(f"exposure {self.exposure!r} not 'auto' or per-frame gains")
+        elif self.exposure is not None:
+            arr = np.asarray(self.exposure, dtype=float)
+            if arr.shape != (n,) or not np.all(np.isfinite(arr) & (arr > 0)):
+                problems.append(f"exposure needs {n} gains > 0 (one a frame), got {self.exposure}")
+        return problems
+
+    def _camera_problems(self) -> list[str]:
+        problems = []
+        try:
+            name, _ = images.parse_pixel_encoding(self.pixel_encoding)
+        except ValueError as err:
+            return [str(err)]
+        if name == "unknown":
+            problems.append("pixel_encoding 'unknown' cannot be rendered")
+        elif name == "linear-radiance" and self.bit_depth is not None:
+            problems.append("bit_depth must be None for linear-radiance (float Radiance pictures)")
+        if self.bit_depth not in (None, 8, 16):
+            problems.append(f"bit_depth {self.bit_depth} not 8 or 16")
+        if not (np.isfinite(self.sensor_noise) and self.sensor_noise >= 0):
+            problems.append(f"sensor_noise {self.sensor_noise} not >= 0")
+        if not (np.isfinite(self.exposure_jitter) and self.exposure_jitter >= 0):
+            problems.append(f"exposure_jitter {self.exposure_jitter} not >= 0")
+        if not (np.isfinite(self.white_scale) and self.white_scale > 0):
+            problems.append(f"white_scale {self.white_scale} not > 0")
+        return problems
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames [-]."""
+        return len(self.times) if self.times is not None else len(self.solar_hours)
 
     @classmethod
     def from_dict(cls, values: dict) -> SequenceConfig:
@@ -150,25 +322,37 @@ class SequenceConfig:
                 f"unknown sequence config field(s): {', '.join(unknown)}; "
                 f"valid: {', '.join(sorted(known))}"
             )
-        tuples = {"solar_hours", "times", "box_size", "ambient"}
-        clean = {k: (tuple(v) if k in tuples and v is not None else v) for k, v in values.items()}
+        tuples = {"solar_hours", "times", "box_size", "ambient", "dni", "dhi", "colour", "exposure"}
+        clean = {
+            k: (tuple(v) if k in tuples and isinstance(v, list | tuple) else v)
+            for k, v in values.items()
+        }
         return cls(**clean)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
-    def key(self) -> str:
-        """Hash of everything that changes the rendered bundle (not the name)."""
+    def _hashed(self) -> dict:
+        """to_dict() without the name, the category and later fields at their default."""
         d = self.to_dict()
         d.pop("name")
+        d.pop("category")
+        for k, default in _LATER_DEFAULTS.items():
+            if d[k] == default:
+                d.pop(k)
+        return d
+
+    def key(self) -> str:
+        """Hash of everything that changes the rendered bundle (not the name)."""
+        d = self._hashed()
         d["renderer"] = _renderer_version()
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]
 
     def scene_key(self) -> str:
         """Hash of the scene only: configs sharing it differ only in the camera."""
-        d = self.to_dict()
-        for k in ("name", "view", "camera_distance", "camera_height", "image_size"):
-            d.pop(k)
+        d = self._hashed()
+        for k in _CAMERA_FIELDS:
+            d.pop(k, None)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]
 
     # -- derived scene quantities ------------------------------------------
@@ -176,6 +360,8 @@ class SequenceConfig:
     def facets(self) -> geometry.Facets:
         if self.shape == "hemisphere":
             return geometry.tessellated_hemisphere(self.radius, self.n_rings, self.n_segments)
+        if self.shape == "gem":
+            return geometry.gem(self.radius, stand=self.gem_stand, azimuth=self.gem_azimuth)
         return geometry.box(self.box_size, self.box_azimuth)
 
     def camera_position(self) -> np.ndarray:
@@ -193,19 +379,58 @@ class SequenceConfig:
             self.frame_times(), self.latitude, self.longitude, self.elevation
         )
 
+    def colour_luminance(self) -> float:
+        """Luminance of the colour, 0.265 R + 0.670 G + 0.065 B (a grey is itself) [-]."""
+        if np.ndim(self.colour) == 0:
+            return float(self.colour)
+        return float(reflectance.luminance_rgb(np.asarray(self.colour, dtype=float)))
+
+    def irradiances(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per-frame DNI and DHI handed to the sky (perez, cie-N), else None [W m^-2].
+
+        Values not given in ``dni``/``dhi`` are pvlib's Ineichen-Perez clear
+        sky at ``linke_turbidity`` (0 with the sun down), for the day of the
+        first frame.
+        """
+        if not (self.sky == "perez" or self.sky.startswith("cie-")):
+            return None
+        day = int(self.frame_times()[0].day_of_year)
+        clear_dni, clear_dhi = sky.clear_sky_irradiance(
+            self.sun_directions(), day, self.linke_turbidity
+        )
+        dni = clear_dni if self.dni is None else np.asarray(self.dni, dtype=float)
+        dhi = clear_dhi if self.dhi is None else np.asarray(self.dhi, dtype=float)
+        return dni, dhi
+
     def truth(self) -> dict:
+        """What made the bundle (the camera's gains and white are added when written)."""
+        rho = self.colour_luminance()
+        irr = self.irradiances()
+        name, _ = images.parse_pixel_encoding(self.pixel_encoding)
         return {
             "material": self.material,
             "colour": self.colour,
+            "colour_luminance": rho,
             "specularity": self.specularity,
             "roughness": self.roughness,
             "sky": self.sky,
+            "category": self.category if self.category is not None else self.sky,
+            "dni": None if irr is None else [float(v) for v in irr[0]],
+            "dhi": None if irr is None else [float(v) for v in irr[1]],
+            "pixel_encoding": self.pixel_encoding,
+            "bit_depth": None if name == "linear-radiance" else self._bit_depth(),
+            "sensor_noise": self.sensor_noise,
+            "shape": self.shape,
             "renderer": "radiance",
             "gloss": float(
-                reflectance.gloss_of_radiance_material(self.material, self.specularity, self.colour)
+                reflectance.gloss_of_radiance_material(self.material, self.specularity, rho)
             ),
             "config": self.to_dict(),
         }
+
+    def _bit_depth(self) -> int:
+        name, _ = images.parse_pixel_encoding(self.pixel_encoding)
+        return self.bit_depth if self.bit_depth is not None else _ENCODING_BITS[name]
 
 
 def _renderer_version() -> str:
@@ -306,7 +531,8 @@ def label_image(config: SequenceConfig, facets: geometry.Facets) -> np.ndarray:
 # -- scene text ----------------------------------------------------------------
 
 
-def _sky_text(config: SequenceConfig, sun_direction: np.ndarray, day_of_year: int) -> str:
+def _sky_text(config: SequenceConfig, frame: int, sun_direction: np.ndarray, day: int) -> str:
+    """Radiance description of frame ``frame``'s sky (and sun)."""
     if config.sky.startswith("gensky-"):
         return radiance.gensky_ang(
             sun_direction,
@@ -314,10 +540,69 @@ def _sky_text(config: SequenceConfig, sun_direction: np.ndarray, day_of_year: in
             ground_reflectance=config.ground_reflectance,
             turbidity=config.turbidity,
         )
-    dni, dhi = sky.clear_sky_irradiance(sun_direction, day_of_year, config.linke_turbidity)
-    return radiance.gendaylit_ang(
-        sun_direction, float(dni), float(dhi), ground_reflectance=config.ground_reflectance
+    dni, dhi = (float(v[frame]) for v in config.irradiances())
+    if config.sky == "perez":
+        return radiance.gendaylit_ang(
+            sun_direction, dni, dhi, ground_reflectance=config.ground_reflectance
+        )
+    return _cie_sky_text(config.sky, sun_direction, dni, dhi, day, config.ground_reflectance)
+
+
+def _cie_sky_text(
+    model: str, sun_direction, dni: float, dhi: float, day: int, ground_reflectance: float
+) -> str:
+    """A CIE general sky as :func:`bayesgloss.sky.daylight` defines it, in Radiance text.
+
+    Parameters
+    ----------
+    model : str
+        "cie-1" ... "cie-15".
+    sun_direction : array_like (3,)
+        Unit vector toward the sun, world frame [-].
+    dni, dhi : float
+        Direct normal and diffuse horizontal irradiance [W m^-2].
+    day : int
+        Day of the year [-].
+    ground_reflectance : float
+        [-]
+    """
+    s = np.asarray(sun_direction, dtype=float)
+    day_sky = sky.daylight(
+        model,
+        s[None, :],
+        direct_normal_irradiance=dni,
+        diffuse_horizontal_irradiance=dhi,
+        day_of_year=day,
+        ground_reflectance=ground_reflectance,
     )
+    sky_type = int(model.split("-")[1])
+    gradation, indicatrix, _ = sky.CIE_SKY_TYPES[sky_type]
+    a, b = sky._CIE_GRADATION[gradation]
+    c, d, e = sky._CIE_INDICATRIX[indicatrix]
+    zenith = float(day_sky.parameters.zenith_radiance[0])
+    ground = float(day_sky.ground_radiance[0])
+    solar = float(day_sky.solar_radiance[0])
+    diameter = np.degrees(2 * np.arccos(1 - day_sky.sun_solid_angle / (2 * np.pi)))
+    sun = " ".join(f"{v:.9g}" for v in s)
+    args = [zenith, ground, *s, a, b, c, d, e]
+    return (
+        f"# {model}: bayesgloss.sky.daylight scale, DNI {dni:.6g} DHI {dhi:.6g} W m^-2\n"
+        f"void light solar\n0\n0\n3 {solar:.6g} {solar:.6g} {solar:.6g}\n\n"
+        f"solar source sun\n0\n0\n4 {sun} {diameter:.6g}\n\n"
+        f"void brightfunc skyfunc\n2 skybright {_cie_cal_file()}\n0\n"
+        f"{len(args)} " + " ".join(f"{v:.9g}" for v in args) + "\n\n"
+    )
+
+
+def _cie_cal_file() -> str:
+    """Path of :data:`CIE_CAL` written once in the system's temporary folder."""
+    digest = hashlib.sha256(CIE_CAL.encode()).hexdigest()[:12]
+    path = Path(tempfile.gettempdir()) / f"bayesgloss-cie-general-{digest}.cal"
+    if not path.exists() or path.read_text() != CIE_CAL:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(CIE_CAL)
+        os.replace(tmp, path)
+    return str(path)
 
 
 def _object_text(config: SequenceConfig, facets: geometry.Facets) -> str:
@@ -395,7 +680,7 @@ def render_bundles(configs, cache_dir, *, jobs: int = 2, progress: bool = True) 
             scene=_object_text(first, facets),
         )
         for t, s in enumerate(suns):
-            tasks.append((key, t, _sky_text(first, s, day)))
+            tasks.append((key, t, _sky_text(first, t, s, day)))
 
     done, start = 0, time.perf_counter()
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
@@ -434,29 +719,148 @@ def _write_group(plan, cache_dir: Path, bundle_io) -> None:
     facets = plan["facets"]
     n_pix = [len(r) for r in plan["rays"]]
     offsets = np.cumsum([0, *n_pix])
+    sun_up = plan["suns"][:, 2] > 0.0
     for i, config in enumerate(plan["members"]):
         n = config.image_size
         labels = label_image(config, facets)
         present = np.isin(facets.ids, np.unique(labels[labels > 0]))
-        frames = [
-            f[offsets[i] : offsets[i + 1]].reshape(n, n, 3).astype(np.float32)
-            for f in plan["frames"]
-        ]
-        times = config.frame_times()
+        frames = np.stack([f[offsets[i] : offsets[i + 1]].reshape(n, n, 3) for f in plan["frames"]])
+        coded, gains, white = camera_response(config, frames, sun_up)
+        name, _ = images.parse_pixel_encoding(config.pixel_encoding)
+        if name == "linear-radiance":
+            frame_format = "hdr"
+        else:
+            frame_format = "png8" if config._bit_depth() == 8 else "png16"
+        truth = config.truth()
+        truth["exposure"] = None if gains is None else [float(g) for g in gains]
+        truth["exposure_written"] = gains is not None and name == "linear-radiance"
+        truth["white"] = white
+        final = _bundle_dir(cache_dir, config)
+        staging = final.with_name(f".{final.name}.staging")
         bundle_io.write_bundle(
-            _bundle_dir(cache_dir, config),
+            staging,
             site={
                 "latitude": config.latitude,
                 "longitude": config.longitude,
                 "elevation": config.elevation,
             },
             camera_position=config.camera_position(),
-            pixel_encoding="linear-radiance",
-            frames=frames,
-            times=[t.isoformat() for t in times],
+            pixel_encoding=config.pixel_encoding,
+            frames=list(coded),
+            times=[t.isoformat() for t in config.frame_times()],
             facets=facets.subset(np.flatnonzero(present)),
             labels=labels,
             ground_reflectance=config.ground_reflectance,
-            truth=config.truth(),
-            frame_format="hdr",
+            truth=truth,
+            frame_format=frame_format,
+            overwrite=True,
         )
+        if truth["exposure_written"]:  # pixel = exposure x radiance (the spec's frames[].exposure)
+            manifest_path = staging / bundle_io.MANIFEST
+            manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+            for frame, gain in zip(manifest["frames"], truth["exposure"], strict=True):
+                frame["exposure"] = gain
+            manifest_path.write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+        if final.exists():  # a bundle left without its manifest by an old interrupted run
+            shutil.rmtree(final)
+        os.replace(staging, final)
+
+
+# -- camera response -----------------------------------------------------------
+
+
+def _noise_generator(config: SequenceConfig) -> np.random.Generator:
+    """The configuration's own generator, seeded by its hash."""
+    return np.random.default_rng(int(config.key(), 16))
+
+
+def auto_exposure(
+    frames: np.ndarray, sun_up: np.ndarray, jitter: float, rng: np.random.Generator
+) -> np.ndarray:
+    """Per-frame gains of a camera that meters each frame's mean luminance.
+
+    ``gain_t = m_ref / max(m_t, m_ref / R) x exp(jitter z_t)``, with ``m_t``
+    the frame's mean luminance, ``m_ref`` the median of ``m_t`` over the
+    frames with the sun up (all frames if none), ``R`` =
+    :data:`AUTO_EXPOSURE_RANGE` the camera's gain range and ``z_t`` standard
+    normal draws from ``rng``.
+
+    Parameters
+    ----------
+    frames : ndarray (T, H, W, 3)
+        Linear RGB radiance [W sr^-1 m^-2].
+    sun_up : ndarray of bool (T,)
+        Frames with the sun above the horizon [-].
+    jitter : float
+        Standard deviation of the log gain about the metered one [-].
+    rng : numpy.random.Generator
+        Source of the jitter.
+
+    Returns
+    -------
+    ndarray (T,)
+        Gains [-], near 1 for a frame of median brightness.
+    """
+    mean = np.mean(frames @ np.asarray(reflectance.LUMINANCE_WEIGHTS), axis=(1, 2))
+    ref = np.median(mean[sun_up]) if np.any(sun_up) else np.median(mean)
+    if not ref > 0:
+        ref = 1.0
+    z = rng.standard_normal(len(mean))
+    return ref / np.maximum(mean, ref / AUTO_EXPOSURE_RANGE) * np.exp(jitter * z)
+
+
+def camera_response(
+    config: SequenceConfig, frames: np.ndarray, sun_up: np.ndarray
+) -> tuple[np.ndarray, np.ndarray | None, float | None]:
+    """What the configured camera stores of rendered frames.
+
+    Gains (``exposure``), then relative Gaussian ``sensor_noise`` (values
+    clipped at 0), then for an integer encoding division by the white, clipping
+    to [0, 1] and the encoding's transfer curve (see the module docstring).
+
+    Parameters
+    ----------
+    config : SequenceConfig
+    frames : ndarray (T, H, W, 3)
+        Rendered RGB radiance [W sr^-1 m^-2].
+    sun_up : ndarray of bool (T,)
+        Frames with the sun above the horizon (where the white is measured) [-].
+
+    Returns
+    -------
+    coded : ndarray (T, H, W, 3)
+        Radiance times gain (float32) for ``linear-radiance``, else normalised
+        code values in [0, 1] for :func:`bayesgloss.bundle.write_bundle` [-].
+    gains : ndarray (T,) or None
+        The exposure gains applied [-].
+    white : float or None
+        Exposed linear value of the top code; None for ``linear-radiance``
+        [W sr^-1 m^-2].
+    """
+    rng = _noise_generator(config)
+    linear = np.asarray(frames, dtype=float)
+    if config.exposure is None:
+        gains = None
+    elif isinstance(config.exposure, str):  # "auto"; the jitter is the generator's first draw
+        gains = auto_exposure(linear, sun_up, config.exposure_jitter, rng)
+    else:
+        gains = np.asarray(config.exposure, dtype=float)
+    exposed = linear if gains is None else linear * gains[:, None, None, None]
+    noisy = exposed
+    if config.sensor_noise > 0:
+        noisy = np.maximum(
+            exposed * (1 + config.sensor_noise * rng.standard_normal(exposed.shape)), 0
+        )
+    name, gamma = images.parse_pixel_encoding(config.pixel_encoding)
+    if name == "linear-radiance":
+        return noisy.astype(np.float32), gains, None
+    metered = exposed[sun_up] if np.any(sun_up) else exposed
+    white = float(config.white_scale * np.percentile(metered, 99))
+    if not white > 0:
+        white = 1.0
+    v = np.clip(noisy / white, 0.0, 1.0)
+    if name == "srgb":
+        v = images.linear_to_srgb(v)
+    elif name == "gamma":
+        v = v ** (1.0 / gamma)
+    return v, gains, white
