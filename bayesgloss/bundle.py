@@ -266,6 +266,7 @@ class _Manifest(NamedTuple):
     times: pd.DatetimeIndex
     facets: Facets
     truth: dict | None
+    exposure: np.ndarray | None
 
 
 def _is_number(value: Any) -> bool:
@@ -356,7 +357,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     frames = check.get(manifest, "frames", "", list)
     if not frames:
         raise check.fail("frames", "the frame list is empty")
-    files, times = [], []
+    files, times, exposures = [], [], []
     for i, frame in enumerate(frames):
         where = f"frames[{i}]"
         if not isinstance(frame, dict):
@@ -368,6 +369,18 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
             )
         files.append(file)
         times.append(_parse_time(check, check.get(frame, "time", where, str), f"{where}.time"))
+        exposure = check.get(frame, "exposure", where, float, required=False)
+        if exposure is not None and not exposure > 0:
+            raise check.fail(f"{where}.exposure", f"must be a positive number, got {exposure!r}")
+        exposures.append(exposure)
+    given = [e is not None for e in exposures]
+    if any(given) and not all(given):
+        i = given.index(False)
+        raise check.fail(
+            f"frames[{i}].exposure",
+            f"missing here but given for frames[{given.index(True)}]: give every frame's "
+            "exposure or none",
+        )
 
     facet_list = check.get(manifest, "facets", "", list)
     if not facet_list:
@@ -406,6 +419,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         pd.DatetimeIndex(times),
         facets,
         truth,
+        np.array(exposures, dtype=float) if all(given) else None,
     )
 
 
@@ -505,6 +519,9 @@ class Bundle:
         Unit vectors toward the apparent sun, world frame.
     truth : dict or None
         What made the bundle. Estimators must not read it.
+    exposure : ndarray (T,) or None
+        ``frames[].exposure``: each frame's relative exposure (a linear
+        factor, any common scale), or None where the manifest gives none.
     """
 
     path: Path
@@ -522,6 +539,7 @@ class Bundle:
     solar_azimuth: np.ndarray = field(repr=False)
     sun_direction: np.ndarray = field(repr=False)
     truth: dict | None = field(repr=False, default=None)
+    exposure: np.ndarray | None = field(repr=False, default=None)
 
     def __len__(self) -> int:
         return len(self.times)
@@ -535,6 +553,13 @@ class Bundle:
     def sun_up(self) -> np.ndarray:
         """Frames with the apparent sun's centre above the horizon, (T,) bool."""
         return self.solar_zenith < 90.0
+
+    @property
+    def exposure_known(self) -> bool:
+        """Whether frames share a known exposure: ``frames[].exposure`` given,
+        or radiance itself (``linear-radiance``). Otherwise the spec lets the
+        camera have changed it from frame to frame."""
+        return self.exposure is not None or self.pixel_encoding == "linear-radiance"
 
     @property
     def response_known(self) -> bool:
@@ -732,6 +757,7 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         solar_azimuth=azimuth,
         sun_direction=_sun.sun_direction(zenith, azimuth),
         truth=parsed.truth,
+        exposure=parsed.exposure,
     )
 
 

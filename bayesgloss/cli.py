@@ -228,6 +228,7 @@ def _estimate(args: argparse.Namespace) -> int:
         seed=args.seed,
         jobs=args.jobs,
         progress=progress,
+        per_frame=args.per_frame,
         sampler_options={"max_steps": args.max_steps},
     )
     if not args.quiet:
@@ -417,6 +418,13 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=8000,
         help="production steps at most per facet (unconverged facets are flagged)",
+    )
+    es.add_argument(
+        "--per-frame",
+        action="store_true",
+        help="infer each frame's sun and sky brightness (and the exposure, unless the bundle "
+        "gives it) jointly with the facets, instead of fixing them to the sky model's "
+        "(slower: minutes; see bayesgloss.illumination)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

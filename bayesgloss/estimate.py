@@ -54,6 +54,7 @@ import numpy as np
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
+from . import illumination as il
 from . import likelihood as lk
 from ._thirdparty import arviz
 from .pool import process_pool
@@ -209,12 +210,95 @@ def _quantiles(x) -> dict:
     }
 
 
+def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options):
+    """The joint model of facets and per-frame illumination
+    (:mod:`bayesgloss.illumination`) on the usable facets and the frames
+    any of them sees: (idata, samples, frames used)."""
+    az = arviz()
+    rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
+    day = sky.daylight(illumination, b.sun_direction, ground_reflectance=rho)
+    ground = "sky" if illumination == "point-sun" else "plane"
+    ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
+    used = ok.any(axis=0) & b.sun_up
+    geometry = b.view_geometry()
+    bases = il.illumination_bases(geometry, day, ground=ground, ground_reflectance=rho)
+    bases = il.IlluminationBases(
+        bases.diffuse[:, keep][..., used], bases.glossy[:, keep][..., used], bases.exponents
+    )
+    exposure = None
+    if b.exposure is not None:
+        exposure = b.exposure[used]
+    elif b.pixel_encoding == "linear-radiance":
+        exposure = np.ones(int(used.sum()))
+    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
+    options = dict(options or {})
+    if "max_steps" in options:  # a sweep of the joint sampler is its step
+        options.setdefault("max_sweeps", options.pop("max_steps"))
+    allowed = {"max_sweeps", "min_sweeps", "n_walkers", "n_ensembles", "draws_per_ensemble"}
+    samples = sampling.sample_joint(
+        data, seed=seed, **{k: v for k, v in options.items() if k in allowed}
+    )
+    rng = np.random.default_rng(seed)
+    th = samples.draws.transpose(1, 0, 2, 3)  # (E, F, S, 4)
+    frames = samples.frames  # (E, S, T, 3)
+    ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
+    pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
+    post = {
+        "gamma": th[..., 0].transpose(0, 2, 1),
+        "n": np.exp(th[..., 1]).transpose(0, 2, 1),
+        "s": np.exp(th[..., 2]).transpose(0, 2, 1),
+        "sigma": np.exp(th[..., 3]).transpose(0, 2, 1),
+        "sun": np.exp(frames[..., 1]),
+        "sky": np.exp(frames[..., 2]),
+    }
+    if exposure is None:
+        post["exposure"] = np.exp(frames[..., 0])
+    frame_index = np.flatnonzero(used)
+    idata = az.from_dict(
+        posterior=post,
+        log_likelihood={"y": ll},
+        posterior_predictive={"y": pred},
+        observed_data={"y": np.where(data.valid, data.y, np.nan)},
+        coords={"facet": curves.ids[keep], "frame": frame_index},
+        dims={
+            **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
+            **{v: ["frame"] for v in ("sun", "sky", "exposure")},
+            "y": ["facet", "frame"],
+        },
+    )
+    idata.observed_data["valid"] = (("facet", "frame"), data.valid)
+    idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
+    idata.observed_data["time"] = (
+        ("frame",),
+        b.times[used].tz_convert("UTC").tz_localize(None),
+    )
+    return idata, samples, used
+
+
+def _frame_summary(idata, b, used) -> list:
+    """Each frame's inferred sun, sky (relative to the sky model's) and exposure."""
+    out = []
+    for j, t in enumerate(np.flatnonzero(used)):
+        entry = {"frame": int(t), "time": b.times[t].isoformat()}
+        for v in ("sun", "sky", "exposure"):
+            if v in idata.posterior:
+                entry[v] = _quantiles(idata.posterior[v].values[..., j])
+        out.append(entry)
+    return out
+
+
+#: The posterior of gamma of a facet or object is "not identifiable" when its
+#: 90 % interval is wider than this (the prior's is 0.9).
+NOT_IDENTIFIABLE_WIDTH = 0.6
+
+
 def estimate_bundle(
     path,
     *,
     illumination: str = "gensky-clear",
     noise: str = "relative",
     camera: str = "auto",
+    per_frame: bool = False,
     seed: int = 0,
     jobs: int = 1,
     progress=None,
@@ -226,7 +310,16 @@ def estimate_bundle(
     ----------
     path : path or bundle.Bundle
     illumination : str
-        One of :data:`ILLUMINATION_MODELS`.
+        One of :data:`ILLUMINATION_MODELS`: the sky's shape.
+    per_frame : bool
+        Infer each frame's sun and sky brightness (and the exposure where
+        the bundle does not fix it) jointly with the facets
+        (:mod:`bayesgloss.illumination`, :func:`bayesgloss.sampling.sample_joint`);
+        False fixes them to the sky model's (the facets sampled
+        independently). The joint model needs relative noise, a known pixel
+        response and uncensored entries: for other noise models and
+        ``unknown`` encodings the brightnesses are fixed (said in the
+        summary), and saturated entries are left out of it.
     noise : {"relative", "gaussian", "student"}
     camera : {"auto", "linear", "power"}
         ``"auto"``: ``"power"`` for an ``unknown`` pixel encoding, else
@@ -250,6 +343,24 @@ def estimate_bundle(
         camera = "linear" if b.response_known else "power"
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
+    joint = per_frame and noise == "relative" and camera == "linear"
+    if joint:
+        idata, samples, used = _joint_fit(
+            b, curves, y, usable, censored, keep, illumination, seed, sampler_options
+        )
+        return _summarise(
+            b,
+            curves,
+            keep,
+            idata,
+            samples,
+            illumination,
+            noise,
+            camera,
+            seed,
+            used,
+            {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"},
+        )
     bases = bundle_bases(b, illumination)
     sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
     data = lk.curve_data(
@@ -263,17 +374,45 @@ def estimate_bundle(
         samples = sampling.sample_posterior(data, **options)
     ids = curves.ids[keep]
     idata = to_inference_data(samples, data, ids, times=b.times, rng=seed)
+    return _summarise(
+        b,
+        curves,
+        keep,
+        idata,
+        samples,
+        illumination,
+        noise,
+        camera,
+        seed,
+        None,
+        {
+            "seconds": samples.seconds,
+            "median_steps": float(np.median(samples.n_steps)),
+            "model": "facets"
+            if not per_frame
+            else "facets (per-frame illumination needs relative noise and a known pixel response)",
+        },
+    )
+
+
+def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run):
+    """The summary of an estimate and its result."""
+    ids = curves.ids[keep]
     diag = convergence(idata)
+    data_priors = lk.Priors()
 
     gam = idata.posterior["gamma"].values  # (E, S, F)
     per_facet = gam.transpose(2, 0, 1).reshape(len(ids), -1)
     facets = []
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
+        gq = _quantiles(per_facet[k])
+        if gq["q95"] - gq["q05"] > NOT_IDENTIFIABLE_WIDTH:
+            flags.append("gloss-not-identifiable")
         facets.append(
             {
                 "id": int(fid),
-                "gamma": _quantiles(per_facet[k]),
+                "gamma": gq,
                 "n": _quantiles(idata.posterior["n"].values[..., k]),
                 "converged": bool(diag["converged"][k]),
                 "rhat": float(diag["rhat"][k]),
@@ -291,13 +430,20 @@ def estimate_bundle(
     pop = population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)
     logn = np.log(idata.posterior["n"].values).transpose(2, 0, 1).reshape(len(ids), -1)
     shared = shared_gloss(
-        np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data.priors
+        np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data_priors
     )
+    obj_q = _quantiles(pop["mu"])
+    # the joint sampler's rule covers every frame's latents too
+    obj_converged = bool(np.all(conv)) and len(ids) > 0 and getattr(samples, "converged", True)
+    obj_flags = [] if obj_converged else ["not-converged"]
+    if obj_q["q95"] - obj_q["q05"] > NOT_IDENTIFIABLE_WIDTH:
+        obj_flags.append("gloss-not-identifiable")
     summary = {
         "object": {
-            "gamma": _quantiles(pop["mu"]),
+            "gamma": obj_q,
+            "flags": obj_flags,
             "n": {"median": shared["n_median"]},
-            "converged": bool(np.all(conv)) and len(ids) > 0,
+            "converged": obj_converged,
             "model": "population (hierarchical Beta)",
             "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
             "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
@@ -310,8 +456,11 @@ def estimate_bundle(
         "camera": camera,
         "unit": curves.unit,
         "bundle": str(Path(b.path).resolve()),
-        "sampler": {"seconds": samples.seconds, "median_steps": float(np.median(samples.n_steps))},
+        "sampler": run,
+        "per_frame_illumination": used is not None,
     }
+    if used is not None:
+        summary["frames"] = _frame_summary(idata, b, used)
     return EstimateResult(idata, summary, samples)
 
 

@@ -19,7 +19,10 @@ runs one problem at a time and its per-step overhead dominates for a
 - :mod:`~bayesgloss.sampling.streams`: :class:`FacetStream`, the scheduler
   of facets through vectorised places (fill, advance, measure, retire);
 - :mod:`~bayesgloss.sampling.posterior`: :func:`sample_posterior`, which
-  deals facets into streams and runs them, in this process or on a pool.
+  deals facets into streams and runs them, in this process or on a pool;
+- :mod:`~bayesgloss.sampling.joint`: :func:`sample_joint`, the facets and
+  each frame's sun, sky and exposure together (Metropolis within Gibbs,
+  every walker a whole state), for :mod:`bayesgloss.illumination`.
 
 Autocorrelation times, R-hat, ESS and the convergence rule live in
 :mod:`bayesgloss.diagnostics`. On the paper's facets the median integrated
@@ -31,6 +34,7 @@ steps.
 
 from .coordinates import RIDGE_MAX_RMS, RidgeCoordinates
 from .ensemble import BatchedEnsemble
+from .joint import JointSamples, sample_joint
 from .jumps import ExponentJump
 from .moves import DEFAULT_MOVES, FACET_MOVES, PLAIN_JUMP
 from .posterior import PosteriorSamples, sample_posterior
@@ -50,4 +54,6 @@ __all__ = [
     "FIRST_CHECK_TAUS",
     "PosteriorSamples",
     "sample_posterior",
+    "JointSamples",
+    "sample_joint",
 ]

@@ -42,11 +42,25 @@ class BatchedEnsemble:
     jump : ExponentJump, optional
         The independence proposals of the ``"n-jump"`` and ``"ridge-jump"``
         moves, one per problem.
+    pass_walkers : bool
+        Call ``log_prob(theta, walkers)`` with the indices (H,) of the
+        walkers ``theta`` proposes for, for densities that differ by walker
+        (the conditional of a block in a Gibbs sampler whose other blocks
+        each walker carries, :mod:`bayesgloss.sampling.joint`).
     """
 
-    def __init__(self, log_prob, moves=DEFAULT_MOVES, rng=None, stretch_a: float = 2.0, jump=None):
+    def __init__(
+        self,
+        log_prob,
+        moves=DEFAULT_MOVES,
+        rng=None,
+        stretch_a: float = 2.0,
+        jump=None,
+        pass_walkers: bool = False,
+    ):
         self.log_prob = log_prob
         self.jump = jump
+        self.pass_walkers = pass_walkers
         names = [m for m, _ in moves]
         bad = set(names) - set(MOVE_NAMES)
         if bad:
@@ -78,7 +92,7 @@ class BatchedEnsemble:
             idx, cidx = halves[k], halves[1 - k]
             s = coords[:, idx]
             q, factor = move.propose(s, coords[:, cidx], self.rng, self.jump)
-            lp_new = self.log_prob(q)
+            lp_new = self.log_prob(q, idx) if self.pass_walkers else self.log_prob(q)
             if isinstance(lp_new, tuple):
                 lp_new, blob_new = lp_new
             lp_old = log_p[:, idx]

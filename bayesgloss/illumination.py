@@ -1,0 +1,423 @@
+"""Per-frame illumination: each frame's sun and sky brightness, and exposure, as unknowns.
+
+A bundle gives the sun's position in every frame, never how bright the sun
+and the sky were, nor (for most cameras) the exposure (the bundle spec,
+"What the estimator may not assume"). All facets of an object see the same
+sun and sky in a frame, so the object itself is the light probe (Sunkavalli
+et al. 2008 split time-lapses into per-frame sun and sky parts; Lalonde et
+al. 2009 estimate per-frame sun and sky for webcams).
+
+The forward model is linear in the incident radiance, so the bases of
+:mod:`bayesgloss.render` split exactly into a sun part (the solar disc and
+the ground it lights) and a sky part (the sky dome and the ground it
+lights), :func:`illumination_bases`. For facet f in frame t
+
+    mu_ft = s_f e_t [a_t S_ft(gamma_f, n_f) + b_t K_ft(gamma_f, n_f)],
+    S = (1 - gamma) D^sun + gamma G^sun(n),  K = (1 - gamma) D^sky + gamma G^sky(n),
+
+with a_t and b_t the sun's and the sky's brightness relative to the sky
+model's prediction, e_t the frame's exposure relative to the others (1
+where the bundle's encoding is ``linear-radiance`` or ``frames[].exposure``
+gives it), s_f the facet's scale (albedo, units). The latent coordinates of
+a frame are ``(log e_t, log a_t, log b_t)``.
+
+Noise: relative, sd = sigma_f (mu_ft + c_f), with the floor c_f =
+``FLOOR_FRACTION`` x the facet's largest observation (fixed by the data, so
+that the likelihood depends on s_f, e_t, a_t, b_t only through their
+products, and frames are independent given sigma). sigma_f is integrated
+out exactly under its log-uniform prior for the facet moves
+(:func:`log_likelihood_sigma_marginal`, the formula of
+:func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`) and drawn from
+its conditional for the frame moves.
+
+Priors (:class:`IlluminationPriors`): log a_t a two-part mixture, a clear
+sun near the model's (weight 0.8, N(0, 0.35^2): haze and the model's
+turbidity), and a sun dimmed or hidden by cloud (weight 0.2, N(-2.5,
+1.5^2): down to a few per cent); log b_t ~ N(0, 0.7^2) (a sky half or
+twice as bright at 1 sd: haze, broken cloud); log e_t ~ N(0, 2^2) where
+the exposure is unknown. The facets' priors are those of
+:class:`bayesgloss.likelihood.Priors`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import special
+
+from . import likelihood as lk
+from . import render
+from .gamma_interval import log_gamma_interval, tail_cuts
+
+__all__ = [
+    "IlluminationPriors",
+    "IlluminationBases",
+    "illumination_bases",
+    "split_sky",
+    "JointData",
+    "joint_data",
+    "log_prior_facets",
+    "log_prior_frames",
+    "unit_parts",
+    "predict",
+    "log_likelihood_sigma_marginal",
+    "frame_log_likelihood",
+    "pointwise_log_likelihood",
+    "sample_prior",
+    "simulate",
+    "LATENTS",
+]
+
+#: The latent coordinates of each frame, in order.
+LATENTS = ("log_exposure", "log_sun", "log_sky")
+FLOOR_FRACTION = 0.01
+
+
+@dataclass(frozen=True)
+class IlluminationPriors:
+    """Priors of the per-frame latents (module docstring). Natural logs."""
+
+    sun_clear_sd: float = 0.35
+    sun_cloud_weight: float = 0.2
+    sun_cloud_mean: float = -2.5
+    sun_cloud_sd: float = 1.5
+    sky_sd: float = 0.7
+    exposure_sd: float = 2.0
+
+
+def split_sky(day):
+    """The sun part and the sky part of a daylight sky.
+
+    Parameters
+    ----------
+    day : bayesgloss.sky.DaylightSky
+
+    Returns
+    -------
+    sun_only, sky_only : DaylightSky
+        ``sun_only``: the solar disc, no sky dome (a ground plane in the
+        forward model is then lit by the sun alone); ``sky_only``: the sky
+        dome with the disc's radiance set to 0. The forward model's bases of
+        the two sum to those of ``day`` (it is linear in the radiance).
+    """
+    sun_only = dataclasses.replace(
+        day, ground_radiance=np.zeros_like(day.ground_radiance), parameters=None
+    )
+    sky_only = dataclasses.replace(day, solar_radiance=np.zeros_like(day.solar_radiance))
+    return sun_only, sky_only
+
+
+@dataclass(frozen=True)
+class IlluminationBases:
+    """Bases split by source: index 0 the sun, 1 the sky.
+
+    Attributes
+    ----------
+    diffuse : ndarray (2, F, T)
+        D^sun, D^sky [W sr^-1 m^-2].
+    glossy : ndarray (2, F, N, T)
+        G^sun, G^sky on the exponent table [W sr^-1 m^-2].
+    exponents : ndarray (N,)
+    """
+
+    diffuse: np.ndarray
+    glossy: np.ndarray
+    exponents: np.ndarray
+
+    def total(self) -> render.FacetBases:
+        """The bases at the model's own brightness (a = b = e = 1)."""
+        return render.FacetBases(self.diffuse.sum(0), self.glossy.sum(0), self.exponents)
+
+    def take(self, index) -> IlluminationBases:
+        """The bases of a subset of facets."""
+        return IlluminationBases(self.diffuse[:, index], self.glossy[:, index], self.exponents)
+
+
+def illumination_bases(
+    geometry, day, exponents=render.DEFAULT_EXPONENTS, **kwargs
+) -> IlluminationBases:
+    """Forward-model bases of the sun part and the sky part of ``day``.
+
+    Parameters
+    ----------
+    geometry : bayesgloss.render.ViewGeometry
+    day : bayesgloss.sky.DaylightSky
+    exponents : array_like
+        Glossy exponent table.
+    **kwargs
+        For :func:`bayesgloss.render.facet_bases` (``ground``,
+        ``ground_reflectance``, ``lobe``...).
+    """
+    parts = [render.facet_bases(geometry, d, exponents, **kwargs) for d in split_sky(day)]
+    diffuse = np.stack([p.diffuse for p in parts])
+    return IlluminationBases(diffuse, np.stack([p.glossy for p in parts]), parts[0].exponents)
+
+
+@dataclass(frozen=True)
+class JointData:
+    """Observations and split bases of F facets over T frames.
+
+    Attributes
+    ----------
+    y : ndarray (F, T)
+        Linear observations, 0 where invalid.
+    valid : ndarray (F, T) of bool
+    floor : ndarray (F,)
+        c_f on the observed scale.
+    diffuse : ndarray (2, F, T)
+    glossy : ndarray (2, F, N, T)
+    log_n_grid : ndarray (N,)
+    log_s_center : ndarray (F,)
+        Prior centre of log s (the data's scale relative to the total bases).
+    log_exposure : ndarray (T,) or None
+        Known log exposure of each frame, or None where it is unknown.
+    priors : bayesgloss.likelihood.Priors
+    frame_priors : IlluminationPriors
+    """
+
+    y: np.ndarray
+    valid: np.ndarray
+    floor: np.ndarray
+    diffuse: np.ndarray
+    glossy: np.ndarray
+    log_n_grid: np.ndarray
+    log_s_center: np.ndarray
+    log_exposure: np.ndarray | None
+    priors: lk.Priors = field(default_factory=lk.Priors)
+    frame_priors: IlluminationPriors = field(default_factory=IlluminationPriors)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(F, T)."""
+        return self.y.shape
+
+    @property
+    def exposure_known(self) -> bool:
+        return self.log_exposure is not None
+
+    def curve_data(self) -> lk.CurveData:
+        """The facets alone at the model's brightness (for starts and constants)."""
+        return lk.CurveData(
+            self.y,
+            self.valid,
+            np.zeros_like(self.valid),
+            self.diffuse.sum(0),
+            self.glossy.sum(0),
+            self.log_n_grid,
+            self.log_s_center,
+            priors=self.priors,
+        )
+
+    @functools.cached_property
+    def tables(self):
+        """(G - D) and the step to the next node, (2, F, N, T) each."""
+        g, d = self.glossy, self.diffuse[:, :, None, :]
+        nxt = np.concatenate([g[:, :, 1:], g[:, :, -1:]], axis=2)
+        return g - d, nxt - g
+
+    @functools.cached_property
+    def sigma_constants(self):
+        """k = T_f / 2, the constant of the sigma-marginal likelihood, and the
+        tail cuts of :func:`bayesgloss.gamma_interval.log_gamma_interval`, (F,) each."""
+        la, lb = self.priors.log_sigma
+        k = 0.5 * self.valid.sum(axis=1).astype(float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
+        return k, const, tail_cuts(k)
+
+
+def joint_data(
+    y,
+    valid,
+    bases: IlluminationBases,
+    *,
+    exposure=None,
+    priors: lk.Priors | None = None,
+    frame_priors: IlluminationPriors | None = None,
+) -> JointData:
+    """Assemble the joint model's inputs.
+
+    Parameters
+    ----------
+    y : array_like (F, T)
+        Linear facet observations.
+    valid : array_like (F, T) of bool
+    bases : IlluminationBases
+        Exponent table uniform in log n.
+    exposure : array_like (T,) or None
+        Known relative exposure of each frame (a linear factor, any common
+        scale); None: unknown, inferred.
+    priors, frame_priors
+        Facet and frame priors (defaults: :class:`bayesgloss.likelihood.Priors`,
+        :class:`IlluminationPriors`).
+    """
+    y = np.asarray(y, dtype=float)
+    valid = np.asarray(valid, dtype=bool) & np.isfinite(y)
+    total = bases.total()
+    cd = lk.curve_data(y, valid, total, priors=priors)
+    y0 = np.where(valid, y, 0.0)
+    floor = FLOOR_FRACTION * np.max(np.where(valid, np.abs(y0), 0.0), axis=1)
+    floor = np.maximum(floor, 1e-30)
+    log_e = None
+    if exposure is not None:
+        e = np.asarray(exposure, dtype=float)
+        if e.shape != (y.shape[1],) or not np.all(np.isfinite(e) & (e > 0)):
+            raise ValueError(f"exposure must be T = {y.shape[1]} positive numbers, got {e}")
+        log_e = np.log(e) - np.mean(np.log(e))
+    return JointData(
+        y0,
+        valid,
+        floor,
+        np.asarray(bases.diffuse, float),
+        np.asarray(bases.glossy, float),
+        cd.log_n_grid,
+        cd.log_s_center,
+        log_e,
+        cd.priors,
+        frame_priors or IlluminationPriors(),
+    )
+
+
+# --------------------------------------------------------------------------
+# priors
+
+
+def log_prior_facets(theta, data: JointData) -> np.ndarray:
+    """Log prior of facet coordinates (gamma, log n, log s), (E, F, W) for theta
+    (E, F, W, >= 3); -inf outside the support."""
+    p = data.priors
+    gamma, log_n, log_s = theta[..., 0], theta[..., 1], theta[..., 2]
+    inside = (gamma >= 0) & (gamma <= 1) & (log_n >= p.log_n[0]) & (log_n <= p.log_n[1])
+    lp = -0.5 * ((log_s - data.log_s_center[:, None]) / p.log_s_sd) ** 2
+    return np.where(inside, lp, -np.inf)
+
+
+def log_prior_frames(lam, data: JointData) -> np.ndarray:
+    """Log prior of each frame's latents, (...) for lam (..., 3) (module docstring)."""
+    q = data.frame_priors
+    log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
+    clear = np.log1p(-q.sun_cloud_weight) - 0.5 * (log_a / q.sun_clear_sd) ** 2
+    clear -= np.log(q.sun_clear_sd)
+    cloud = np.log(q.sun_cloud_weight) - 0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2
+    cloud -= np.log(q.sun_cloud_sd)
+    lp = np.logaddexp(clear, cloud) - 0.5 * (log_b / q.sky_sd) ** 2
+    if data.exposure_known:
+        return lp
+    return lp - 0.5 * (log_e / q.exposure_sd) ** 2
+
+
+# --------------------------------------------------------------------------
+# the likelihood
+
+
+def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, np.ndarray]:
+    """S and K of the module docstring at unit scale, (E, F, W, T) each, for
+    theta (E, F, W, >= 2); G linear in log n between the table's nodes."""
+    g0, dg = data.tables if tables is None else tables
+    j, w = lk.grid_position(theta[..., 1], data.log_n_grid)  # (E, F, W)
+    f_idx = np.arange(data.shape[0])[None, :, None]
+    gamma = theta[..., 0:1]
+    out = []
+    for part in (0, 1):
+        glossy_minus_d = g0[part][f_idx, j] + w[..., None] * dg[part][f_idx, j]  # (E, F, W, T)
+        out.append(data.diffuse[part][None, :, None, :] + gamma * glossy_minus_d)
+    return out[0], out[1]
+
+
+def _frame_factors(lam, data: JointData):
+    """e a and e b, (E, 1, W, T) each, for lam (E, W, T, 3)."""
+    log_e = lam[..., 0] if data.log_exposure is None else data.log_exposure
+    ea = np.exp(log_e + lam[..., 1])[:, None]
+    eb = np.exp(log_e + lam[..., 2])[:, None]
+    return ea, eb
+
+
+def predict(theta, lam, data: JointData, parts=None) -> np.ndarray:
+    """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, 3)."""
+    s_part, k_part = unit_parts(theta, data) if parts is None else parts
+    ea, eb = _frame_factors(lam, data)
+    return np.exp(theta[..., 2:3]) * (ea * s_part + eb * k_part)
+
+
+def _residuals(mu, data: JointData):
+    """(z', log v): (y - mu) / (mu + c) and log(mu + c), 0 where invalid."""
+    v = mu + data.floor[None, :, None, None]
+    valid = data.valid[None, :, None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.where(valid, (data.y[None, :, None, :] - mu) / v, 0.0)
+        log_v = np.where(valid, np.log(np.maximum(v, 1e-300)), 0.0)
+    return z, log_v
+
+
+def log_likelihood_sigma_marginal(theta, lam, data: JointData, parts=None, with_q=False):
+    """Each facet's log likelihood with sigma integrated out, (E, F, W).
+
+    The closed form of :func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`
+    with Q = sum_t z'_t^2 and the sd per unit sigma v_t = mu_ft + c_f.
+    """
+    la, lb = data.priors.log_sigma
+    z, log_v = _residuals(predict(theta, lam, data, parts), data)
+    q = np.maximum(np.sum(z * z, axis=-1), 1e-300)
+    k, const, (lo_cut, hi_cut) = data.sigma_constants
+    shape = q.shape
+    k, lo_cut, hi_cut = (np.broadcast_to(x[None, :, None], shape) for x in (k, lo_cut, hi_cut))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        log_int = log_gamma_interval(
+            k, q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), (lo_cut, hi_cut)
+        )
+        ll = const[None, :, None] - log_v.sum(-1) - k * np.log(q) + log_int
+    ll = np.where(k > 0, ll, 0.0)
+    ll = np.where(np.isnan(ll), -np.inf, ll)
+    return (ll, q) if with_q else ll
+
+
+def frame_log_likelihood(theta, lam, log_sigma, data: JointData, parts) -> np.ndarray:
+    """Log likelihood of each frame given every facet's sigma, (E, W, T), up to
+    a constant (sum over facets of -z^2 / 2 - log(mu + c))."""
+    z, log_v = _residuals(predict(theta, lam, data, parts), data)
+    inv_sigma = np.exp(-log_sigma)[..., None]  # (E, F, W, 1)
+    zz = z * inv_sigma
+    return np.sum(-0.5 * zz * zz - log_v, axis=1)
+
+
+def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
+    """Log likelihood of every (facet, frame), (E, F, W, T), theta with log
+    sigma as its 4th coordinate; NaN where invalid."""
+    mu = predict(theta, lam, data)
+    z, log_v = _residuals(mu, data)
+    log_sigma = theta[..., 3:4]
+    z = z * np.exp(-log_sigma)
+    ll = -0.5 * z * z - log_v - log_sigma - 0.5 * np.log(2 * np.pi)
+    return np.where(data.valid[None, :, None, :], ll, np.nan)
+
+
+def sample_prior(data: JointData, size: int, rng: np.random.Generator):
+    """Draws from the joint prior: theta (F, size, 4) and lam (size, T, 3)."""
+    p, q = data.priors, data.frame_priors
+    f, t = data.shape
+    th = np.empty((f, size, 4))
+    th[..., 0] = rng.uniform(0, 1, (f, size))
+    th[..., 1] = rng.uniform(*p.log_n, (f, size))
+    th[..., 2] = data.log_s_center[:, None] + p.log_s_sd * rng.standard_normal((f, size))
+    th[..., 3] = rng.uniform(*p.log_sigma, (f, size))
+    lam = np.empty((size, t, 3))
+    lam[..., 0] = 0.0 if data.exposure_known else q.exposure_sd * rng.standard_normal((size, t))
+    cloud = rng.random((size, t)) < q.sun_cloud_weight
+    lam[..., 1] = np.where(
+        cloud,
+        q.sun_cloud_mean + q.sun_cloud_sd * rng.standard_normal((size, t)),
+        q.sun_clear_sd * rng.standard_normal((size, t)),
+    )
+    lam[..., 2] = q.sky_sd * rng.standard_normal((size, t))
+    return th, lam
+
+
+def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarray:
+    """Observations from the model, (E, F, W, T), theta (E, F, W, 4) with log
+    sigma, lam (E, W, T, 3)."""
+    mu = predict(theta, lam, data)
+    sd = np.exp(theta[..., 3:4]) * (mu + data.floor[None, :, None, None])
+    return mu + sd * rng.standard_normal(mu.shape)

@@ -1,0 +1,421 @@
+"""The joint sampler: facets and per-frame illumination together (Metropolis within Gibbs).
+
+The model of :mod:`bayesgloss.illumination` couples the facets only through
+each frame's latents (log e_t, log a_t, log b_t). :func:`sample_joint`
+runs E independent ensembles of W walkers; every walker is a whole state
+(every facet's gamma, log n, log s and every frame's latents), and a sweep
+updates one block at a time, each move leaving the joint posterior
+invariant:
+
+1. **facets given the frames**: one step of the affine-invariant ensemble
+   moves (:class:`bayesgloss.sampling.ensemble.BatchedEnsemble`, stretch
+   and differential evolution) on each facet's (gamma, log n, log s), sigma
+   integrated out, every walker's density conditioned on its own frames
+   (the moves stay valid, as the other walkers are held fixed while one
+   half moves); the ensembles move log s plus the walker's brightness level
+   (a translation per walker), so that their spread is the facets' own;
+2. **sigma given the rest**: each facet's log sigma drawn exactly from its
+   conditional (:func:`bayesgloss.likelihood.draw_log_sigma`), so that,
+   given sigma, frames are independent (a partially collapsed Gibbs step,
+   van Dyk & Park 2008: sigma is drawn after, and discarded before, the
+   facet step that integrates it out);
+3. **each frame's latents given the facets and sigma**: a Gaussian random
+   walk, half the walkers at a time, whose covariance is the inverse of the
+   frame's Fisher information (plus the priors' precisions) at the mean
+   latents of the other half, so that it is symmetric and fits a
+   conditional that is sharp where many facets see the frame and broad
+   where none tells (a hidden sun);
+4. **the exposure ridge**: where the exposure is unknown, log e_t + c with
+   log a_t and log b_t - c (the likelihood is unchanged: accepted by the
+   prior ratio);
+5. **the scale ridge**: every facet's log s - c with every frame's
+   brightness + c leaves the likelihood unchanged; accepted by the prior
+   ratio (without it the sampler would cross this direction, which only the
+   priors bound, in steps of the data's precision).
+
+The run stops when, over its second half, gamma of every facet and the sun
+and sky latents of every frame have converged across the ensembles by the
+rule of :mod:`bayesgloss.diagnostics` (R-hat < 1.01, bulk and tail ESS >=
+400), or at ``max_sweeps`` (flagged).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import diagnostics
+from .. import illumination as il
+from .. import likelihood as lk
+from .coordinates import node_fits
+from .ensemble import BatchedEnsemble
+from .moves import DEFAULT_MOVES
+from .starts import initial_ensemble
+
+__all__ = ["JointSamples", "sample_joint"]
+
+#: Kept chains hold every THIN-th sweep.
+THIN = 4
+
+
+@dataclass
+class JointSamples:
+    """Draws of the joint model.
+
+    Attributes
+    ----------
+    draws : ndarray (F, E, S, 4)
+        Facets' gamma, log n, log s, log sigma; F facets, E ensembles, S
+        draws each (each walker's trajectory thinned evenly, walkers one
+        after another).
+    frames : ndarray (E, S, T, 3)
+        Each frame's (log e, log a, log b) at the same draws.
+    rhat, ess_bulk, ess_tail : ndarray (F + 2 T,)
+        Diagnostics of gamma per facet, then log a and log b per frame.
+    converged : bool
+    n_sweeps : int
+    acceptance : dict
+        Acceptance rates of the facet and frame moves.
+    seconds : float
+    """
+
+    draws: np.ndarray
+    frames: np.ndarray
+    rhat: np.ndarray
+    ess_bulk: np.ndarray
+    ess_tail: np.ndarray
+    converged: bool
+    n_sweeps: int
+    acceptance: dict
+    seconds: float
+    parameters: tuple = ("gamma", "log_n", "log_s", "log_sigma")
+
+
+class _JointChain:
+    """The state of E ensembles of W walkers and one sweep of the moves."""
+
+    def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
+        self.data, self.rng = data, rng
+        self.e, self.w = n_ensembles, n_walkers
+        self.f, self.t = data.shape
+        self.cd = data.curve_data()
+        self.tables = data.tables
+        lam0 = starting_frames(data)  # (T, 3)
+        start = initial_ensemble(
+            _curve_data_at(data, lam0).take(np.tile(np.arange(self.f), self.e)), n_walkers, rng
+        )
+        self.th = np.ascontiguousarray(start[..., :3]).reshape(self.e, self.f, self.w, 3)
+        self.level = np.zeros((self.e, self.w))
+        self.free = np.array([not data.exposure_known, True, True])
+        self.lam = lam0 + 0.05 * rng.standard_normal((self.e, self.w, self.t, 3)) * self.free
+        self.ensemble = BatchedEnsemble(self._log_prob, DEFAULT_MOVES, rng, pass_walkers=True)
+        self.log_p = self._log_prob(self._coords(), np.arange(self.w))
+        q = data.priors.log_s_sd
+        fp = data.frame_priors
+        if data.exposure_known:
+            precision = self.f / q**2 + self.t * (1 / fp.sun_clear_sd**2 + 1 / fp.sky_sd**2)
+        else:
+            precision = self.f / q**2 + self.t / fp.exposure_sd**2
+        self.scale_step = 1.0 / np.sqrt(precision)
+        self.accepted = {"facets": 0.0, "frames": 0.0, "scale": 0.0}
+        self.sweeps = 0
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.th
+
+    def _level(self) -> np.ndarray:
+        """Each walker's brightness level, (E, W): the mean over frames of
+        log e + (log a + log b) / 2, which the scale ridge shifts by c."""
+        lam = self.lam
+        log_e = lam[..., 0] if self.data.log_exposure is None else self.data.log_exposure
+        return np.mean(log_e + 0.5 * (lam[..., 1] + lam[..., 2]), axis=-1)
+
+    def _coords(self) -> np.ndarray:
+        """The ensemble's coordinates of the facets, (E F, W, 3): gamma, log n
+        and log s plus the walker's level (a translation per walker, fixed
+        while the facets move, so that the ensemble's spread in the scale is
+        the facets' own and not the scale ridge's)."""
+        c = self.th.copy()
+        c[..., 2] += self.level[:, None, :]
+        return c.reshape(self.e * self.f, self.w, 3)
+
+    def _log_prob(self, q, walkers):
+        th = q.reshape(self.e, self.f, len(walkers), 3).copy()
+        th[..., 2] -= self.level[:, None, walkers]
+        lp = il.log_prior_facets(th, self.data)
+        ok = np.isfinite(lp)
+        ll = il.log_likelihood_sigma_marginal(th, self.lam[:, walkers], self.data)
+        return np.where(ok, lp + ll, -np.inf).reshape(self.e * self.f, len(walkers))
+
+    def sweep(self) -> None:
+        data = self.data
+        self.level = self._level()
+        coords = self._coords()
+        acc = self.ensemble.step(coords, self.log_p)
+        self.accepted["facets"] += acc.mean()
+        th = coords.reshape(self.e, self.f, self.w, 3)
+        th[..., 2] -= self.level[:, None, :]
+        self.th = th
+        parts = il.unit_parts(th, data, self.tables)
+        _, q = il.log_likelihood_sigma_marginal(th, self.lam, data, parts, with_q=True)
+        log_sigma = self._draw_log_sigma(q)
+        self._frame_moves(th, parts, log_sigma)
+        if not data.exposure_known:
+            self._exposure_ridge()
+        self._scale_ridge()
+        self.level = self._level()
+        self.log_p = self._log_prob(self._coords(), np.arange(self.w))
+        self.sweeps += 1
+
+    def _draw_log_sigma(self, q):
+        qf = q.transpose(1, 0, 2).reshape(self.f, -1)  # (F, E W)
+        dummy = np.zeros(qf.shape + (3,))
+        ls = lk.draw_log_sigma(dummy, self.cd, self.rng, q=qf)
+        return ls.reshape(self.f, self.e, self.w).transpose(1, 0, 2)
+
+    def _frame_density(self, th, lam, parts, log_sigma):
+        return il.frame_log_likelihood(th, lam, log_sigma, self.data, parts) + il.log_prior_frames(
+            lam, self.data
+        )
+
+    def _frame_moves(self, th, parts, log_sigma) -> None:
+        """Random-walk Metropolis on each frame's latents, half the walkers at a
+        time, with the proposal covariance (2.38^2 / d) H^-1 of the frame's
+        conditional Fisher information H at the mean latents of the other
+        half (fixed while this half moves, so the proposal is symmetric)."""
+        rng, w = self.rng, self.w
+        d = int(self.free.sum())
+        cur = self._frame_density(th, self.lam, parts, log_sigma)  # (E, W, T)
+        order = rng.permutation(w)
+        halves = (order[: w // 2], order[w // 2 :])
+        for k in (0, 1):
+            idx, cidx = halves[k], halves[1 - k]
+            ref = np.broadcast_to(self.lam[:, cidx].mean(1, keepdims=True), self.lam[:, idx].shape)
+            sub = (parts[0][:, :, idx], parts[1][:, :, idx])
+            chol = self._proposal_factor(th[:, :, idx], ref, sub, log_sigma[:, :, idx])
+            scale = 2.38 / np.sqrt(d) * (0.3 if rng.random() < 0.3 else 1.0)
+            z = rng.standard_normal(chol.shape[:-1])
+            prop = self.lam[:, idx] + scale * np.einsum("ewtij,ewtj->ewti", chol, z) * self.free
+            new = self._frame_density(th[:, :, idx], prop, sub, log_sigma[:, :, idx])
+            ok = np.log(rng.random(new.shape)) < new - cur[:, idx]
+            self.lam[:, idx] = np.where(ok[..., None], prop, self.lam[:, idx])
+            cur[:, idx] = np.where(ok, new, cur[:, idx])
+            self.accepted["frames"] += ok.mean() / 2
+
+    def _proposal_factor(self, th, lam_ref, parts, log_sigma):
+        """Cholesky factor of the inverse of the frame latents' Fisher
+        information plus the priors' Gaussian precisions, (E, H, T, 3, 3)."""
+        data = self.data
+        ea, eb = il._frame_factors(lam_ref, data)
+        s = np.exp(th[..., 2:3])
+        mu_a, mu_b = s * ea * parts[0], s * eb * parts[1]  # (E, F, H, T)
+        v = mu_a + mu_b + data.floor[None, :, None, None]
+        weight = (np.exp(-2 * log_sigma)[..., None] + 2.0) / v**2 * data.valid[None, :, None, :]
+        # d mu / d (log e, log a, log b) = (mu_a + mu_b, mu_a, mu_b)
+        aa = np.sum(weight * mu_a * mu_a, axis=1)
+        ab = np.sum(weight * mu_a * mu_b, axis=1)
+        bb = np.sum(weight * mu_b * mu_b, axis=1)
+        ea_, eb_ = aa + ab, ab + bb
+        info = np.stack(
+            [
+                np.stack([ea_ + eb_, ea_, eb_], -1),
+                np.stack([ea_, aa, ab], -1),
+                np.stack([eb_, ab, bb], -1),
+            ],
+            -2,
+        )
+        fp = data.frame_priors
+        e_prec = 1e12 if data.exposure_known else 1.0 / fp.exposure_sd**2
+        info += np.diag([e_prec, 1.0 / fp.sun_cloud_sd**2, 1.0 / fp.sky_sd**2])
+        return np.linalg.cholesky(np.linalg.inv(info))
+
+    def _exposure_ridge(self) -> None:
+        c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
+        prop = self.lam + c[..., None] * np.array([1.0, -1.0, -1.0])
+        ratio = il.log_prior_frames(prop, self.data) - il.log_prior_frames(self.lam, self.data)
+        ok = np.log(self.rng.random(ratio.shape)) < ratio
+        self.lam = np.where(ok[..., None], prop, self.lam)
+
+    def _scale_ridge(self, tries: int = 3) -> None:
+        shift = np.array([0.0, 1.0, 1.0]) if self.data.exposure_known else np.array([1.0, 0, 0])
+        for _ in range(tries):
+            c = self.scale_step * self.rng.standard_normal((self.e, self.w))
+            th = self.theta
+            th_new = th.copy()
+            th_new[..., 2] -= c[:, None, :]
+            lam_new = self.lam + c[:, :, None, None] * shift
+            old = il.log_prior_facets(th, self.data).sum(1) + il.log_prior_frames(
+                self.lam, self.data
+            ).sum(-1)
+            new = il.log_prior_facets(th_new, self.data).sum(1) + il.log_prior_frames(
+                lam_new, self.data
+            ).sum(-1)
+            ok = np.log(self.rng.random(c.shape)) < new - old  # (E, W)
+            th[..., 2] = np.where(ok[:, None, :], th_new[..., 2], th[..., 2])
+            self.lam = np.where(ok[:, :, None, None], lam_new, self.lam)
+            self.accepted["scale"] += ok.mean() / tries
+
+
+def _curve_data_at(data: il.JointData, lam) -> lk.CurveData:
+    """The facets alone with every frame's latents fixed at ``lam`` (T, 3)."""
+    log_e = lam[:, 0] if data.log_exposure is None else data.log_exposure
+    ea, eb = np.exp(log_e + lam[:, 1]), np.exp(log_e + lam[:, 2])
+    cd = data.curve_data()
+    return lk.CurveData(
+        cd.y,
+        cd.valid,
+        cd.censored,
+        ea * data.diffuse[0] + eb * data.diffuse[1],
+        ea * data.glossy[0] + eb * data.glossy[1],
+        cd.log_n_grid,
+        cd.log_s_center,
+        priors=cd.priors,
+    )
+
+
+def starting_frames(data: il.JointData, rounds: int = 8) -> np.ndarray:
+    """A start for every frame's latents near the joint optimum, (T, 3).
+
+    Alternates least squares: the facets' best (gamma, n, s) on the
+    exponent table given the frames (:func:`node_fits`), then each frame's
+    e a and e b by non-negative weighted least squares over the facets
+    given them (weights 1 / (y + c)^2, the relative noise), ``rounds``
+    times, from the sky model's brightness. Without it the sampler would
+    spend its burn-in carrying all facets' gloss and the frames' brightness
+    together from the model's brightness to theirs.
+    """
+    f, t = data.shape
+    lam = np.zeros((t, 3))
+    w = np.where(data.valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
+    for _ in range(rounds):
+        cd = _curve_data_at(data, lam)
+        a, b, rms = node_fits(cd)
+        best = np.argmin(rms, axis=1)
+        s = (a + b)[np.arange(f), best]
+        gamma = np.where(s > 0, b[np.arange(f), best] / np.maximum(s, 1e-300), 0.5)
+        th = np.zeros((1, f, 1, 3))
+        th[..., 0] = gamma[None, :, None]
+        th[..., 1] = data.log_n_grid[best][None, :, None]
+        u, v = il.unit_parts(th, data)
+        u, v = s[:, None] * u[0, :, 0], s[:, None] * v[0, :, 0]  # (F, T)
+        # 2 x 2 normal equations of y_ft = x u_ft + z v_ft per frame
+        uu, uv, vv = (w * u * u).sum(0), (w * u * v).sum(0), (w * v * v).sum(0)
+        uy, vy = (w * u * data.y).sum(0), (w * v * data.y).sum(0)
+        det = uu * vv - uv**2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = (vv * uy - uv * vy) / det
+            z = (uu * vy - uv * uy) / det
+            # one of the two at zero where the joint solution leaves the quadrant
+            x_only, z_only = uy / uu, vy / vv
+        bad = ~(np.isfinite(x) & np.isfinite(z) & (x > 0) & (z > 0))
+        x = np.where(bad, np.where(x_only * uy > z_only * vy, x_only, 1e-3), x)
+        z = np.where(bad, np.where(x_only * uy > z_only * vy, 1e-3, z_only), z)
+        x = np.clip(np.nan_to_num(x, nan=1.0), 1e-3, 1e3)
+        z = np.clip(np.nan_to_num(z, nan=1.0), 1e-3, 1e3)
+        log_e = lam[:, 0] if data.log_exposure is None else data.log_exposure
+        # the scale is the facets' business: keep the frames' mean level at the prior's
+        shift = np.mean(0.5 * (np.log(x) + np.log(z)))
+        lam[:, 1] = np.log(x) - log_e - shift
+        lam[:, 2] = np.log(z) - log_e - shift
+    return lam
+
+
+def _diagnosed(th_kept, lam_kept):
+    """(rhat, ess_bulk, ess_tail, ok) of gamma per facet and log a, log b per
+    frame, for kept chains (n, E, F, W, 3) and (n, E, W, T, 3)."""
+    n, e, f, w, _ = th_kept.shape
+    t = lam_kept.shape[3]
+    gamma = th_kept[..., 0].transpose(2, 1, 3, 0).reshape(f, e, w * n)
+    lat = lam_kept[..., 1:].transpose(3, 4, 1, 2, 0).reshape(2 * t, e, w * n)
+    return diagnostics.diagnose(np.concatenate([gamma, lat]).astype(float))
+
+
+def sample_joint(
+    data: il.JointData,
+    *,
+    n_ensembles: int = 4,
+    n_walkers: int = 16,
+    chunk: int = 200,
+    min_sweeps: int = 800,
+    max_sweeps: int = 8000,
+    draws_per_ensemble: int = 1000,
+    seed: int | None = 0,
+    progress=None,
+) -> JointSamples:
+    """Sample the joint posterior of facets and per-frame illumination.
+
+    Parameters
+    ----------
+    data : bayesgloss.illumination.JointData
+    n_ensembles : int
+        Independent ensembles (R-hat needs several).
+    n_walkers : int
+        Walkers per ensemble (even, >= 6).
+    chunk : int
+        Sweeps between convergence checks.
+    min_sweeps, max_sweeps : int
+        Sweeps at least and at most; the first half of the run is burn-in.
+    draws_per_ensemble : int
+        Draws kept per ensemble (every walker's trajectory thinned evenly).
+    seed : int or None
+    progress : callable, optional
+        Called with (sweeps done, max_sweeps) after each chunk.
+
+    Returns
+    -------
+    JointSamples
+    """
+    t0 = time.perf_counter()
+    if n_walkers < 6 or n_walkers % 2:
+        raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
+    rng = np.random.default_rng(seed)
+    chain = _JointChain(data, n_ensembles, n_walkers, rng)
+    th_kept, lam_kept = [], []
+    diag = None
+    while chain.sweeps < max_sweeps:
+        for _ in range(chunk):
+            chain.sweep()
+            if chain.sweeps % THIN == 0:
+                th_kept.append(chain.theta.astype(np.float32))
+                lam_kept.append(chain.lam.astype(np.float32))
+        if progress:
+            progress(chain.sweeps, max_sweeps)
+        if chain.sweeps >= min_sweeps:
+            half = len(th_kept) // 2
+            diag = _diagnosed(np.stack(th_kept[half:]), np.stack(lam_kept[half:]))
+            if np.all(diag[3]):
+                break
+    half = len(th_kept) // 2
+    th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, 3)
+    lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, 3)
+    if diag is None:
+        diag = _diagnosed(th, lam)
+    n = len(th)
+    keep = np.linspace(0, n - 1, max(1, min(n, draws_per_ensemble // n_walkers))).round()
+    th, lam = th[keep.astype(int)], lam[keep.astype(int)]
+    m = len(th)
+    e, f, w = n_ensembles, data.shape[0], n_walkers
+    # (m, E, F, W, 3) -> (F, E, W m, 3), walkers one after another
+    draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, 3)
+    frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], 3)
+    # log sigma from its conditional at every draw
+    th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
+    _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
+    qf = q.transpose(1, 0, 2).reshape(f, -1)
+    ls = lk.draw_log_sigma(np.zeros(qf.shape + (3,)), data.curve_data(), rng, q=qf)
+    draws = np.concatenate([draws3, ls.reshape(f, e, w * m, 1)], axis=-1)
+    sweeps = max(chain.sweeps, 1)
+    return JointSamples(
+        draws,
+        frames,
+        diag[0],
+        diag[1],
+        diag[2],
+        bool(np.all(diag[3])),
+        chain.sweeps,
+        {k: v / sweeps for k, v in chain.accepted.items()},
+        time.perf_counter() - t0,
+    )

@@ -1,0 +1,119 @@
+"""The per-frame illumination model (bayesgloss.illumination) and its joint
+sampler (bayesgloss.sampling.joint)."""
+
+import numpy as np
+import pytest
+
+from bayesgloss import illumination as il
+from bayesgloss import render, scene
+from bayesgloss.sampling import sample_joint
+
+
+@pytest.fixture(scope="module")
+def paper_split():
+    """Split bases of the paper scene's facets seen from the SW, sun-up frames."""
+    seq = scene.paper_sequence(view="SW")
+    seen = seq.geometry.cos_view > 0.1
+    g = render.ViewGeometry(
+        seq.geometry.normal[seen],
+        seq.geometry.view_direction[seen],
+        seq.geometry.center[seen],
+        seq.geometry.occluder,
+    )
+    up = seq.sky.sun_direction[:, 2] > 0.02
+    full = il.illumination_bases(g, seq.sky)
+    total = render.facet_bases(g, seq.sky)
+    return full, total, up
+
+
+def test_sun_and_sky_parts_sum_to_the_whole(paper_split):
+    # the forward model is linear in radiance: the parts must add up to the
+    # bases of the whole sky (ground plane lit by both, object's shadow included)
+    full, total, up = paper_split
+    np.testing.assert_allclose(full.total().diffuse, total.diffuse, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(full.total().glossy, total.glossy, rtol=1e-12, atol=1e-12)
+    # and neither part is empty or the whole: a clear noon sun gives most of D
+    noon = np.argmax(np.where(up, total.diffuse.max(0), 0))
+    share = full.diffuse[0, :, noon].sum() / total.diffuse[:, noon].sum()
+    assert 0.5 < share < 0.95
+
+
+def test_frame_prior_is_the_documented_mixture():
+    data = il.JointData(
+        np.ones((1, 1)),
+        np.ones((1, 1), bool),
+        np.ones(1),
+        np.ones((2, 1, 1)),
+        np.ones((2, 1, 2, 1)),
+        np.array([0.0, 1.0]),
+        np.zeros(1),
+        np.zeros(1),
+    )
+    x = np.linspace(-12, 6, 20001)
+    lam = np.zeros((len(x), 3))
+    lam[:, 1] = x
+    dens = np.exp(il.log_prior_frames(lam, data) - 0.5 * np.log(2 * np.pi))
+    # the sun's prior, without 1/sqrt(2 pi), integrates to 1 (the sky at its mode adds 0)
+    assert abs(np.trapezoid(dens, x) - 1.0) < 1e-6
+    # a hidden sun (log a = -3) is far more probable than a clear-only prior allows
+    p = il.IlluminationPriors()
+    assert dens[np.searchsorted(x, -3.0)] > 50 * np.exp(-0.5 * (3 / p.sun_clear_sd) ** 2)
+
+
+def test_joint_model_finds_two_clouded_frames(paper_split):
+    # an object simulated by the forward model, its sun cut to 5 % in two frames
+    # and the sky 1.8x there; the joint sampler must find both, and gloss
+    full, _, up = paper_split
+    rng = np.random.default_rng(7)
+    facets = np.arange(full.diffuse.shape[1])
+    bases = il.IlluminationBases(
+        full.diffuse[:, facets][..., up], full.glossy[:, facets][..., up], full.exponents
+    )
+    f, t = bases.diffuse.shape[1:]
+    lam = np.zeros((1, 1, t, 3))
+    lam[..., 1], lam[..., 2] = np.log(0.9), np.log(1.2)
+    clouded = [5, 9]
+    lam[0, 0, clouded, 1], lam[0, 0, clouded, 2] = np.log(0.05), np.log(1.8)
+    th = np.zeros((1, f, 1, 4))
+    th[..., 0], th[..., 1], th[..., 2], th[..., 3] = 0.5, np.log(200.0), np.log(0.5), np.log(0.03)
+    valid = np.ones((f, t), bool)
+    ref = il.joint_data(np.ones((f, t)), valid, bases, exposure=np.ones(t))
+    y = il.simulate(th, lam, ref, rng)[0, :, 0]
+    data = il.joint_data(y, valid, bases, exposure=np.ones(t))
+    res = sample_joint(data, seed=1, min_sweeps=1200, max_sweeps=1200)
+    sun = np.exp(res.frames[..., 1].reshape(-1, t))
+    lo, hi = np.quantile(sun, [0.05, 0.95], axis=0)
+    # both clouded frames: interval near 0.05, far from a clear sun
+    assert np.all(hi[clouded] < 0.15) and np.all(lo[clouded] > 0.01)
+    clear = np.setdiff1d(np.arange(t), clouded)
+    # clear frames: the truth (0.9) inside nearly every 90 % interval; away from
+    # dawn and dusk (where the low sun barely lights the facets) never near 0
+    assert np.sum((lo[clear] < 0.9) & (hi[clear] > 0.9)) >= len(clear) - 2
+    assert np.all(lo[clear[1:-1]] > 0.6)
+    gamma = np.median(res.draws[..., 0].reshape(f, -1), axis=1)
+    # the facets' gloss right despite the unknown brightnesses (the mean's
+    # posterior sd is ~0.005 here; 0.02 allows for a short run)
+    assert abs(np.median(gamma) - 0.5) < 0.02
+
+
+def test_known_exposure_is_fixed_and_unknown_is_inferred(paper_split):
+    full, _, up = paper_split
+    bases = il.IlluminationBases(
+        full.diffuse[:, :6][..., up], full.glossy[:, :6][..., up], full.exponents
+    )
+    t = bases.diffuse.shape[-1]
+    y = np.ones((6, t))
+    known = il.joint_data(y, np.ones((6, t), bool), bases, exposure=2.0 ** np.arange(t))
+    assert known.exposure_known
+    # stored relative to the mean log: only ratios matter
+    np.testing.assert_allclose(np.diff(known.log_exposure), np.log(2.0))
+    free = il.joint_data(y, np.ones((6, t), bool), bases)
+    lam = np.zeros((1, 1, t, 3))
+    lam[..., 0] = 1.0
+    # the same latents predict e x more with a free exposure, ignore it when known
+    th = np.zeros((1, 6, 1, 3))
+    th[..., 0], th[..., 1] = 0.3, 2.0
+    ratio = il.predict(th, lam, free) / il.predict(th, lam * [0, 1, 1], free)
+    np.testing.assert_allclose(ratio, np.e)
+    with pytest.raises(ValueError, match="positive"):
+        il.joint_data(y, np.ones((6, t), bool), bases, exposure=-np.ones(t))
