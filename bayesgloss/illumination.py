@@ -212,11 +212,13 @@ class JointData:
         )
 
     @functools.cached_property
-    def tables(self):
-        """(G - D) and the step to the next node, (2, F, N, T) each."""
+    def tables(self) -> np.ndarray:
+        """Rows (G^sun - D^sun, its step to the next node, G^sky - D^sky, its
+        step) of every (facet, node), (F N, 4, T), for one gather per walker."""
         g, d = self.glossy, self.diffuse[:, :, None, :]
         nxt = np.concatenate([g[:, :, 1:], g[:, :, -1:]], axis=2)
-        return g - d, nxt - g
+        rows = np.stack([g[0] - d[0], nxt[0] - g[0], g[1] - d[1], nxt[1] - g[1]], axis=2)
+        return np.ascontiguousarray(rows.reshape(-1, 4, g.shape[-1]))
 
     @functools.cached_property
     def sigma_constants(self):
@@ -316,15 +318,15 @@ def log_prior_frames(lam, data: JointData) -> np.ndarray:
 def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, np.ndarray]:
     """S and K of the module docstring at unit scale, (E, F, W, T) each, for
     theta (E, F, W, >= 2); G linear in log n between the table's nodes."""
-    g0, dg = data.tables if tables is None else tables
+    rows = data.tables if tables is None else tables
+    n = len(data.log_n_grid)
     j, w = lk.grid_position(theta[..., 1], data.log_n_grid)  # (E, F, W)
-    f_idx = np.arange(data.shape[0])[None, :, None]
-    gamma = theta[..., 0:1]
-    out = []
-    for part in (0, 1):
-        glossy_minus_d = g0[part][f_idx, j] + w[..., None] * dg[part][f_idx, j]  # (E, F, W, T)
-        out.append(data.diffuse[part][None, :, None, :] + gamma * glossy_minus_d)
-    return out[0], out[1]
+    index = j + (np.arange(data.shape[0]) * n)[None, :, None]
+    r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 4, -1)  # (E, F, W, 4, T)
+    w, gamma = w[..., None], theta[..., 0:1]
+    s_part = data.diffuse[0][None, :, None, :] + gamma * (r[..., 0, :] + w * r[..., 1, :])
+    k_part = data.diffuse[1][None, :, None, :] + gamma * (r[..., 2, :] + w * r[..., 3, :])
+    return s_part, k_part
 
 
 def _frame_factors(lam, data: JointData):

@@ -1350,3 +1350,34 @@ def test_cli_curves_table_and_csv(tmp_path, capsys):
     np.testing.assert_allclose(
         table.luminance.to_numpy(float).reshape(len(facets.ids), 4), reference, rtol=1e-12
     )
+
+
+def test_frame_exposure_is_read_and_checked(tmp_path):
+    # frames[].exposure (spec, newest fields): every frame's or none, positive
+    path, _ = _write(tmp_path, encoding="linear")
+    b = bd.read_bundle(path)
+    assert b.exposure is None and not b.exposure_known  # a linear image of unknown gain
+
+    def give(values):
+        def edit(m):
+            for f, v in zip(m["frames"], values, strict=True):
+                f["exposure"] = v
+
+        return edit
+
+    n = len(b.times)
+    _edit_manifest(path, give([0.5 * (k + 1) for k in range(n)]))
+    b = bd.read_bundle(path)
+    np.testing.assert_allclose(b.exposure, 0.5 * (np.arange(n) + 1))
+    assert b.exposure_known
+    _edit_manifest(path, give([1.0, -2.0] + [1.0] * (n - 2)))
+    with pytest.raises(bd.BundleError, match=r"frames\[1\]\.exposure.*positive"):
+        bd.read_bundle(path)
+    _edit_manifest(
+        path,
+        lambda m: (
+            [m["frames"][0].update(exposure=1.0)] + [f.pop("exposure") for f in m["frames"][1:]]
+        ),
+    )
+    with pytest.raises(bd.BundleError, match=r"frames\[1\]\.exposure.*every frame"):
+        bd.read_bundle(path)

@@ -58,6 +58,10 @@ __all__ = ["JointSamples", "sample_joint"]
 
 #: Kept chains hold every THIN-th sweep.
 THIN = 4
+#: Collective moves per sweep (directions adapted during burn-in).
+COLLECTIVE = 4
+#: Burn-in sweeps, in rounds between which the collective directions are adapted.
+BURN_ROUNDS = (200, 200, 200)
 
 
 @dataclass
@@ -119,7 +123,8 @@ class _JointChain:
         else:
             precision = self.f / q**2 + self.t / fp.exposure_sd**2
         self.scale_step = 1.0 / np.sqrt(precision)
-        self.accepted = {"facets": 0.0, "frames": 0.0, "scale": 0.0}
+        self.accepted = {"facets": 0.0, "frames": 0.0, "scale": 0.0, "collective": 0.0}
+        self.directions = None
         self.sweeps = 0
 
     @property
@@ -166,6 +171,7 @@ class _JointChain:
         if not data.exposure_known:
             self._exposure_ridge()
         self._scale_ridge()
+        self.collective_moves()
         self.level = self._level()
         self.log_p = self._log_prob(self._coords(), np.arange(self.w))
         self.sweeps += 1
@@ -231,6 +237,80 @@ class _JointChain:
         e_prec = 1e12 if data.exposure_known else 1.0 / fp.exposure_sd**2
         info += np.diag([e_prec, 1.0 / fp.sun_cloud_sd**2, 1.0 / fp.sky_sd**2])
         return np.linalg.cholesky(np.linalg.inv(info))
+
+    # -- collective moves: along the directions Gibbs is slow in ----------------
+
+    def state(self) -> np.ndarray:
+        """Every walker's whole state as a vector, (E, W, D): each facet's
+        gamma, log n, log s, then each frame's free latents."""
+        th = self.th.transpose(0, 2, 1, 3).reshape(self.e, self.w, -1)
+        lam = self.lam[..., self.free].reshape(self.e, self.w, -1)
+        return np.concatenate([th, lam], axis=-1)
+
+    def _split(self, x):
+        f3 = 3 * self.f
+        th = x[..., :f3].reshape(self.e, self.w, self.f, 3).transpose(0, 2, 1, 3)
+        lam = self.lam.copy()
+        lam[..., self.free] = x[..., f3:].reshape(self.e, self.w, self.t, -1)
+        return th, lam
+
+    def _full_density(self, th, lam) -> np.ndarray:
+        """The joint log posterior (sigma integrated out) of every walker, (E, W)."""
+        lp = il.log_prior_facets(th, self.data)
+        ll = il.log_likelihood_sigma_marginal(th, lam, self.data)
+        out = np.sum(np.where(np.isfinite(lp), lp + ll, -np.inf), axis=1)
+        return out + il.log_prior_frames(lam, self.data).sum(-1)
+
+    def adapt(self, states) -> None:
+        """Directions for the collective moves from burn-in states (n, E, W, D).
+
+        The generalised eigenvectors of the states' covariance S against the
+        block-diagonal conditional covariance C (the inverse of each block's
+        part of S^-1: a facet's (gamma, log n, log s), a frame's latents):
+        S v = lambda C v. Along a v with large lambda the posterior is lambda
+        times wider than the blocks' moves can step, and the Gibbs sweeps
+        crawl; :meth:`collective_moves` steps along the ``COLLECTIVE`` widest.
+        Called during burn-in only: the production run's kernel is fixed.
+        """
+        from scipy import linalg
+
+        x = states.reshape(-1, states.shape[-1]).astype(float)
+        cov = np.cov(x, rowvar=False)
+        d = len(cov)
+        cov += 1e-12 * np.trace(cov) / d * np.eye(d)
+        prec = np.linalg.inv(cov)
+        cond = np.zeros_like(cov)
+        blocks = [slice(3 * i, 3 * i + 3) for i in range(self.f)]
+        k = int(self.free.sum())
+        blocks += [slice(3 * self.f + k * i, 3 * self.f + k * (i + 1)) for i in range(self.t)]
+        for b in blocks:
+            cond[b, b] = np.linalg.inv(prec[b, b])
+        vals, vecs = linalg.eigh(cov, cond)
+        top = np.argsort(vals)[::-1][:COLLECTIVE]
+        # scaled to the posterior's sd along each: v' S^-1 v = 1
+        vecs = vecs[:, top]
+        vecs /= np.sqrt(np.einsum("di,de,ei->i", vecs, prec, vecs))
+        self.directions = vecs.T  # (K, D)
+        self.inflation = vals[top]
+
+    def collective_moves(self) -> None:
+        """A random-walk Metropolis step along each adapted direction (module docstring)."""
+        if self.directions is None:
+            return
+        x = self.state()
+        cur = self._full_density(self.th, self.lam)
+        for v in self.directions:
+            z = self.rng.standard_normal((self.e, self.w, 1)) * (
+                1.0 if self.rng.random() < 0.7 else 0.3
+            )
+            prop = x + z * v
+            th, lam = self._split(prop)
+            new = self._full_density(th, lam)
+            ok = np.log(self.rng.random(new.shape)) < new - cur
+            x = np.where(ok[..., None], prop, x)
+            cur = np.where(ok, new, cur)
+            self.accepted["collective"] += ok.mean() / len(self.directions)
+        self.th, self.lam = self._split(x)
 
     def _exposure_ridge(self) -> None:
         c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
@@ -329,7 +409,7 @@ def _diagnosed(th_kept, lam_kept):
     n, e, f, w, _ = th_kept.shape
     t = lam_kept.shape[3]
     gamma = th_kept[..., 0].transpose(2, 1, 3, 0).reshape(f, e, w * n)
-    lat = lam_kept[..., 1:].transpose(3, 4, 1, 2, 0).reshape(2 * t, e, w * n)
+    lat = lam_kept[..., 1:].transpose(4, 3, 1, 2, 0).reshape(2 * t, e, w * n)  # a's, then b's
     return diagnostics.diagnose(np.concatenate([gamma, lat]).astype(float))
 
 
@@ -373,17 +453,25 @@ def sample_joint(
         raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
     rng = np.random.default_rng(seed)
     chain = _JointChain(data, n_ensembles, n_walkers, rng)
+    for length in BURN_ROUNDS:
+        states = []
+        for _ in range(length):
+            chain.sweep()
+            if chain.sweeps % THIN == 0:
+                states.append(chain.state())
+        chain.adapt(np.stack(states[len(states) // 2 :]))
+    burn = chain.sweeps
     th_kept, lam_kept = [], []
     diag = None
-    while chain.sweeps < max_sweeps:
+    while chain.sweeps < burn + max_sweeps:
         for _ in range(chunk):
             chain.sweep()
             if chain.sweeps % THIN == 0:
                 th_kept.append(chain.theta.astype(np.float32))
                 lam_kept.append(chain.lam.astype(np.float32))
         if progress:
-            progress(chain.sweeps, max_sweeps)
-        if chain.sweeps >= min_sweeps:
+            progress(chain.sweeps - burn, max_sweeps)
+        if chain.sweeps - burn >= min_sweeps:
             half = len(th_kept) // 2
             diag = _diagnosed(np.stack(th_kept[half:]), np.stack(lam_kept[half:]))
             if np.all(diag[3]):
