@@ -282,6 +282,7 @@ def _estimate_many(args, progress) -> int:
             {
                 "bundle": str(Path(b).resolve()),
                 "illumination": args.sky,
+                "per_frame": args.per_frame,
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
@@ -397,10 +398,11 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument("bundle", nargs="+", help="sequence bundle folder(s)")
     es.add_argument(
         "--sky",
-        default="gensky-clear",
-        choices=sky.sky_models(),
+        default=None,
+        choices=("auto", *sky.sky_models()),
         metavar="SKY",
-        help="illumination model (default: gensky-clear; one of "
+        help="the sky's shape (default: gensky-clear; with --per-frame 'auto', each frame's "
+        "sky a mixture of gensky's clear and overcast skies; one of "
         + ", ".join(sky.sky_models())
         + ")",
     )

@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy import special
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
@@ -216,15 +217,18 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     any of them sees: (idata, samples, frames used)."""
     az = arviz()
     rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
-    day = sky.daylight(illumination, b.sun_direction, ground_reflectance=rho)
+    first, second = AUTO_SKIES if illumination == "auto" else (illumination, None)
+    day = sky.daylight(first, b.sun_direction, ground_reflectance=rho)
+    other = (
+        None if second is None else sky.daylight(second, b.sun_direction, ground_reflectance=rho)
+    )
     ground = "sky" if illumination == "point-sun" else "plane"
     ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
     used = ok.any(axis=0) & b.sun_up
     geometry = b.view_geometry()
-    bases = il.illumination_bases(geometry, day, ground=ground, ground_reflectance=rho)
-    bases = il.IlluminationBases(
-        bases.diffuse[:, keep][..., used], bases.glossy[:, keep][..., used], bases.exponents
-    )
+    bases = il.illumination_bases(
+        geometry, day, second=other, ground=ground, ground_reflectance=rho
+    ).take(keep, used)
     exposure = None
     if b.exposure is not None:
         exposure = b.exposure[used]
@@ -253,6 +257,8 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     }
     if exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
+    if data.shapes == 2:
+        post["overcast"] = special.expit(frames[..., 3])
     frame_index = np.flatnonzero(used)
     idata = az.from_dict(
         posterior=post,
@@ -262,7 +268,7 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
         coords={"facet": curves.ids[keep], "frame": frame_index},
         dims={
             **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
-            **{v: ["frame"] for v in ("sun", "sky", "exposure")},
+            **{v: ["frame"] for v in ("sun", "sky", "exposure", "overcast")},
             "y": ["facet", "frame"],
         },
     )
@@ -280,12 +286,16 @@ def _frame_summary(idata, b, used) -> list:
     out = []
     for j, t in enumerate(np.flatnonzero(used)):
         entry = {"frame": int(t), "time": b.times[t].isoformat()}
-        for v in ("sun", "sky", "exposure"):
+        for v in ("sun", "sky", "exposure", "overcast"):
             if v in idata.posterior:
                 entry[v] = _quantiles(idata.posterior[v].values[..., j])
         out.append(entry)
     return out
 
+
+#: ``illumination="auto"`` with per-frame illumination: each frame's sky a
+#: mixture of these two shapes, its weight inferred (:mod:`bayesgloss.illumination`).
+AUTO_SKIES = ("gensky-clear", "gensky-overcast")
 
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
@@ -295,7 +305,7 @@ NOT_IDENTIFIABLE_WIDTH = 0.6
 def estimate_bundle(
     path,
     *,
-    illumination: str = "gensky-clear",
+    illumination: str | None = None,
     noise: str = "relative",
     camera: str = "auto",
     per_frame: bool = False,
@@ -309,8 +319,11 @@ def estimate_bundle(
     Parameters
     ----------
     path : path or bundle.Bundle
-    illumination : str
-        One of :data:`ILLUMINATION_MODELS`: the sky's shape.
+    illumination : str, optional
+        The sky's shape: one of :data:`ILLUMINATION_MODELS`, or ``"auto"``
+        (with ``per_frame`` only: each frame's sky a mixture of
+        :data:`AUTO_SKIES`, its weight inferred). Default: ``"auto"`` with
+        ``per_frame``, ``"gensky-clear"`` without.
     per_frame : bool
         Infer each frame's sun and sky brightness (and the exposure where
         the bundle does not fix it) jointly with the facets
@@ -344,6 +357,13 @@ def estimate_bundle(
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
     joint = per_frame and noise == "relative" and camera == "linear"
+    if illumination is None:
+        illumination = "auto" if joint else "gensky-clear"
+    if illumination == "auto" and not joint:
+        raise ValueError(
+            "illumination 'auto' (a per-frame mixture of sky shapes) needs per-frame "
+            "illumination (relative noise and a known pixel response); name a sky model"
+        )
     if joint:
         idata, samples, used = _joint_fit(
             b, curves, y, usable, censored, keep, illumination, seed, sampler_options
@@ -466,11 +486,12 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
 
 def estimate_unit(
     bundle: str,
-    illumination: str = "gensky-clear",
+    illumination: str | None = "gensky-clear",
     noise: str = "relative",
     camera: str = "auto",
     seed: int = 0,
     max_steps: int = 8000,
+    per_frame: bool = False,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -483,6 +504,7 @@ def estimate_unit(
         illumination=illumination,
         noise=noise,
         camera=camera,
+        per_frame=per_frame,
         seed=seed,
         jobs=1,
         sampler_options={"max_steps": max_steps},

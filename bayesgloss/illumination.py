@@ -12,14 +12,20 @@ The forward model is linear in the incident radiance, so the bases of
 the ground it lights) and a sky part (the sky dome and the ground it
 lights), :func:`illumination_bases`. For facet f in frame t
 
-    mu_ft = s_f e_t [a_t S_ft(gamma_f, n_f) + b_t K_ft(gamma_f, n_f)],
-    S = (1 - gamma) D^sun + gamma G^sun(n),  K = (1 - gamma) D^sky + gamma G^sky(n),
+    mu_ft = s_f e_t [a_t S_ft + b_t ((1 - w_t) K^A_ft + w_t K^B_ft)],
+    S = (1 - gamma_f) D^sun + gamma_f G^sun(n_f),  K = (1 - gamma_f) D^sky + gamma_f G^sky(n_f),
 
 with a_t and b_t the sun's and the sky's brightness relative to the sky
 model's prediction, e_t the frame's exposure relative to the others (1
 where the bundle's encoding is ``linear-radiance`` or ``frames[].exposure``
-gives it), s_f the facet's scale (albedo, units). The latent coordinates of
-a frame are ``(log e_t, log a_t, log b_t)``.
+gives it), s_f the facet's scale (albedo, units). The sky's shape is a
+per-frame mixture of two sky models, A and B (by default gensky's clear and
+overcast skies, B scaled to A's diffuse horizontal irradiance in each
+frame, so that b_t keeps its meaning), with weight w_t: the model is
+linear in its bases for any shape in between, and each frame finds its own
+shape (a clear, hazy, intermediate or overcast sky) instead of being told
+one. With one sky model, K^B = K^A and w_t is fixed. The latent coordinates
+of a frame are ``(log e_t, log a_t, log b_t, logit w_t)``.
 
 Noise: relative, sd = sigma_f (mu_ft + c_f), with the floor c_f =
 ``FLOOR_FRACTION`` x the facet's largest observation (fixed by the data, so
@@ -34,9 +40,9 @@ Priors (:class:`IlluminationPriors`): log a_t a two-part mixture, a clear
 sun near the model's (weight 0.8, N(0, 0.35^2): haze and the model's
 turbidity), and a sun dimmed or hidden by cloud (weight 0.2, N(-2.5,
 1.5^2): down to a few per cent); log b_t ~ N(0, 0.7^2) (a sky half or
-twice as bright at 1 sd: haze, broken cloud); log e_t ~ N(0, 2^2) where
-the exposure is unknown. The facets' priors are those of
-:class:`bayesgloss.likelihood.Priors`.
+twice as bright at 1 sd: haze, broken cloud); w_t uniform on [0, 1]
+(logit w_t logistic); log e_t ~ N(0, 2^2) where the exposure is unknown.
+The facets' priors are those of :class:`bayesgloss.likelihood.Priors`.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ __all__ = [
     "log_prior_facets",
     "log_prior_frames",
     "unit_parts",
+    "frame_weights",
     "predict",
     "log_likelihood_sigma_marginal",
     "frame_log_likelihood",
@@ -72,7 +79,7 @@ __all__ = [
 ]
 
 #: The latent coordinates of each frame, in order.
-LATENTS = ("log_exposure", "log_sun", "log_sky")
+LATENTS = ("log_exposure", "log_sun", "log_sky", "logit_sky_b")
 FLOOR_FRACTION = 0.01
 
 
@@ -112,48 +119,80 @@ def split_sky(day):
 
 @dataclass(frozen=True)
 class IlluminationBases:
-    """Bases split by source: index 0 the sun, 1 the sky.
+    """Bases split by source: index 0 the sun, 1 sky model A, 2 sky model B.
 
     Attributes
     ----------
-    diffuse : ndarray (2, F, T)
-        D^sun, D^sky [W sr^-1 m^-2].
-    glossy : ndarray (2, F, N, T)
-        G^sun, G^sky on the exponent table [W sr^-1 m^-2].
+    diffuse : ndarray (3, F, T)
+        D^sun, D^sky of A and of B [W sr^-1 m^-2].
+    glossy : ndarray (3, F, N, T)
+        G^sun, G^sky of A and of B on the exponent table [W sr^-1 m^-2].
     exponents : ndarray (N,)
+    shapes : int
+        Sky models: 2, or 1 (B a copy of A).
     """
 
     diffuse: np.ndarray
     glossy: np.ndarray
     exponents: np.ndarray
+    shapes: int = 1
 
     def total(self) -> render.FacetBases:
-        """The bases at the model's own brightness (a = b = e = 1)."""
-        return render.FacetBases(self.diffuse.sum(0), self.glossy.sum(0), self.exponents)
+        """The bases at the model's brightness (a = b = e = 1, w = 1/2)."""
+        mix = np.array([1.0, 0.5, 0.5])
+        return render.FacetBases(
+            np.tensordot(mix, self.diffuse, 1), np.tensordot(mix, self.glossy, 1), self.exponents
+        )
 
-    def take(self, index) -> IlluminationBases:
-        """The bases of a subset of facets."""
-        return IlluminationBases(self.diffuse[:, index], self.glossy[:, index], self.exponents)
+    def take(self, facets=slice(None), frames=slice(None)) -> IlluminationBases:
+        """The bases of a subset of facets and frames."""
+        return IlluminationBases(
+            self.diffuse[:, facets][..., frames],
+            self.glossy[:, facets][..., frames],
+            self.exponents,
+            self.shapes,
+        )
 
 
 def illumination_bases(
-    geometry, day, exponents=render.DEFAULT_EXPONENTS, **kwargs
+    geometry, day, exponents=render.DEFAULT_EXPONENTS, second=None, **kwargs
 ) -> IlluminationBases:
-    """Forward-model bases of the sun part and the sky part of ``day``.
+    """Forward-model bases of the sun of ``day``, its sky, and a second sky's.
 
     Parameters
     ----------
     geometry : bayesgloss.render.ViewGeometry
     day : bayesgloss.sky.DaylightSky
+        Sky model A, and the sun.
     exponents : array_like
         Glossy exponent table.
+    second : bayesgloss.sky.DaylightSky, optional
+        Sky model B (its sun ignored), scaled in each frame to A's diffuse
+        horizontal irradiance; None: one sky model.
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...).
     """
-    parts = [render.facet_bases(geometry, d, exponents, **kwargs) for d in split_sky(day)]
-    diffuse = np.stack([p.diffuse for p in parts])
-    return IlluminationBases(diffuse, np.stack([p.glossy for p in parts]), parts[0].exponents)
+    from .sky import horizontal_irradiance
+
+    sun_only, sky_a = split_sky(day)
+    parts = [render.facet_bases(geometry, d, exponents, **kwargs) for d in (sun_only, sky_a)]
+    d_parts, g_parts = [p.diffuse for p in parts], [p.glossy for p in parts]
+    if second is None:
+        d_parts.append(d_parts[1])
+        g_parts.append(g_parts[1])
+    else:
+        sky_b = split_sky(second)[1]
+        other = render.facet_bases(geometry, sky_b, exponents, **kwargs)
+        e_a = horizontal_irradiance(sky_a, include_sun=False)
+        e_b = horizontal_irradiance(sky_b, include_sun=False)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)
+        d_parts.append(other.diffuse * factor)
+        g_parts.append(other.glossy * factor)
+    return IlluminationBases(
+        np.stack(d_parts), np.stack(g_parts), parts[0].exponents, 1 if second is None else 2
+    )
 
 
 @dataclass(frozen=True)
@@ -167,8 +206,8 @@ class JointData:
     valid : ndarray (F, T) of bool
     floor : ndarray (F,)
         c_f on the observed scale.
-    diffuse : ndarray (2, F, T)
-    glossy : ndarray (2, F, N, T)
+    diffuse : ndarray (3, F, T)
+    glossy : ndarray (3, F, N, T)
     log_n_grid : ndarray (N,)
     log_s_center : ndarray (F,)
         Prior centre of log s (the data's scale relative to the total bases).
@@ -176,6 +215,8 @@ class JointData:
         Known log exposure of each frame, or None where it is unknown.
     priors : bayesgloss.likelihood.Priors
     frame_priors : IlluminationPriors
+    shapes : int
+        Sky models (1: w_t fixed).
     """
 
     y: np.ndarray
@@ -188,6 +229,12 @@ class JointData:
     log_exposure: np.ndarray | None
     priors: lk.Priors = field(default_factory=lk.Priors)
     frame_priors: IlluminationPriors = field(default_factory=IlluminationPriors)
+    shapes: int = 1
+
+    @property
+    def free(self) -> np.ndarray:
+        """Which of the frame latents (:data:`LATENTS`) are unknowns, (4,) of bool."""
+        return np.array([not self.exposure_known, True, True, self.shapes == 2])
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -200,12 +247,13 @@ class JointData:
 
     def curve_data(self) -> lk.CurveData:
         """The facets alone at the model's brightness (for starts and constants)."""
+        mix = np.array([1.0, 0.5, 0.5])
         return lk.CurveData(
             self.y,
             self.valid,
             np.zeros_like(self.valid),
-            self.diffuse.sum(0),
-            self.glossy.sum(0),
+            np.tensordot(mix, self.diffuse, 1),
+            np.tensordot(mix, self.glossy, 1),
             self.log_n_grid,
             self.log_s_center,
             priors=self.priors,
@@ -213,12 +261,12 @@ class JointData:
 
     @functools.cached_property
     def tables(self) -> np.ndarray:
-        """Rows (G^sun - D^sun, its step to the next node, G^sky - D^sky, its
-        step) of every (facet, node), (F N, 4, T), for one gather per walker."""
+        """Rows (G - D, its step to the next node) of each source, of every
+        (facet, node), (F N, 6, T), for one gather per walker."""
         g, d = self.glossy, self.diffuse[:, :, None, :]
         nxt = np.concatenate([g[:, :, 1:], g[:, :, -1:]], axis=2)
-        rows = np.stack([g[0] - d[0], nxt[0] - g[0], g[1] - d[1], nxt[1] - g[1]], axis=2)
-        return np.ascontiguousarray(rows.reshape(-1, 4, g.shape[-1]))
+        rows = np.stack([x for p in range(3) for x in (g[p] - d[p], nxt[p] - g[p])], axis=2)
+        return np.ascontiguousarray(rows.reshape(-1, 6, g.shape[-1]))
 
     @functools.cached_property
     def sigma_constants(self):
@@ -280,6 +328,7 @@ def joint_data(
         log_e,
         cd.priors,
         frame_priors or IlluminationPriors(),
+        bases.shapes,
     )
 
 
@@ -298,7 +347,7 @@ def log_prior_facets(theta, data: JointData) -> np.ndarray:
 
 
 def log_prior_frames(lam, data: JointData) -> np.ndarray:
-    """Log prior of each frame's latents, (...) for lam (..., 3) (module docstring)."""
+    """Log prior of each frame's latents, (...) for lam (..., 4) (module docstring)."""
     q = data.frame_priors
     log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
     clear = np.log1p(-q.sun_cloud_weight) - 0.5 * (log_a / q.sun_clear_sd) ** 2
@@ -306,6 +355,8 @@ def log_prior_frames(lam, data: JointData) -> np.ndarray:
     cloud = np.log(q.sun_cloud_weight) - 0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2
     cloud -= np.log(q.sun_cloud_sd)
     lp = np.logaddexp(clear, cloud) - 0.5 * (log_b / q.sky_sd) ** 2
+    if data.shapes == 2:  # w uniform: logit w logistic
+        lp = lp - 2.0 * np.logaddexp(0.0, -lam[..., 3]) - lam[..., 3]
     if data.exposure_known:
         return lp
     return lp - 0.5 * (log_e / q.exposure_sd) ** 2
@@ -315,33 +366,44 @@ def log_prior_frames(lam, data: JointData) -> np.ndarray:
 # the likelihood
 
 
-def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, np.ndarray]:
-    """S and K of the module docstring at unit scale, (E, F, W, T) each, for
-    theta (E, F, W, >= 2); G linear in log n between the table's nodes."""
+def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, ...]:
+    """S, K^A and K^B of the module docstring at unit scale, (E, F, W, T)
+    each, for theta (E, F, W, >= 2); G linear in log n between the table's
+    nodes (K^B is K^A with one sky model)."""
     rows = data.tables if tables is None else tables
     n = len(data.log_n_grid)
     j, w = lk.grid_position(theta[..., 1], data.log_n_grid)  # (E, F, W)
     index = j + (np.arange(data.shape[0]) * n)[None, :, None]
-    r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 4, -1)  # (E, F, W, 4, T)
+    r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 6, -1)  # (E, F, W, 6, T)
     w, gamma = w[..., None], theta[..., 0:1]
-    s_part = data.diffuse[0][None, :, None, :] + gamma * (r[..., 0, :] + w * r[..., 1, :])
-    k_part = data.diffuse[1][None, :, None, :] + gamma * (r[..., 2, :] + w * r[..., 3, :])
-    return s_part, k_part
+    parts = [
+        data.diffuse[p][None, :, None, :] + gamma * (r[..., 2 * p, :] + w * r[..., 2 * p + 1, :])
+        for p in range(3 if data.shapes == 2 else 2)
+    ]
+    return (*parts, parts[1]) if data.shapes == 1 else tuple(parts)
 
 
-def _frame_factors(lam, data: JointData):
-    """e a and e b, (E, 1, W, T) each, for lam (E, W, T, 3)."""
+def frame_weights(lam, data: JointData):
+    """The weights of S, K^A and K^B, e a, e b (1 - w) and e b w, (E, 1, W, T)
+    each, for lam (E, W, T, 4)."""
     log_e = lam[..., 0] if data.log_exposure is None else data.log_exposure
     ea = np.exp(log_e + lam[..., 1])[:, None]
     eb = np.exp(log_e + lam[..., 2])[:, None]
-    return ea, eb
+    if data.shapes == 1:
+        return ea, eb, 0.0 * eb
+    w = special.expit(lam[..., 3])[:, None]
+    return ea, eb * (1.0 - w), eb * w
 
 
 def predict(theta, lam, data: JointData, parts=None) -> np.ndarray:
-    """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, 3)."""
-    s_part, k_part = unit_parts(theta, data) if parts is None else parts
-    ea, eb = _frame_factors(lam, data)
-    return np.exp(theta[..., 2:3]) * (ea * s_part + eb * k_part)
+    """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, 4)."""
+    parts = unit_parts(theta, data) if parts is None else parts
+    weights = frame_weights(lam, data)
+    mu = weights[0] * parts[0]
+    mu += weights[1] * parts[1]
+    if data.shapes == 2:
+        mu += weights[2] * parts[2]
+    return np.exp(theta[..., 2:3]) * mu
 
 
 def _residuals(mu, data: JointData):
@@ -397,7 +459,7 @@ def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
 
 
 def sample_prior(data: JointData, size: int, rng: np.random.Generator):
-    """Draws from the joint prior: theta (F, size, 4) and lam (size, T, 3)."""
+    """Draws from the joint prior: theta (F, size, 4) and lam (size, T, 4)."""
     p, q = data.priors, data.frame_priors
     f, t = data.shape
     th = np.empty((f, size, 4))
@@ -405,7 +467,7 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
     th[..., 1] = rng.uniform(*p.log_n, (f, size))
     th[..., 2] = data.log_s_center[:, None] + p.log_s_sd * rng.standard_normal((f, size))
     th[..., 3] = rng.uniform(*p.log_sigma, (f, size))
-    lam = np.empty((size, t, 3))
+    lam = np.zeros((size, t, 4))
     lam[..., 0] = 0.0 if data.exposure_known else q.exposure_sd * rng.standard_normal((size, t))
     cloud = rng.random((size, t)) < q.sun_cloud_weight
     lam[..., 1] = np.where(
@@ -414,12 +476,14 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
         q.sun_clear_sd * rng.standard_normal((size, t)),
     )
     lam[..., 2] = q.sky_sd * rng.standard_normal((size, t))
+    if data.shapes == 2:
+        lam[..., 3] = rng.logistic(size=(size, t))
     return th, lam
 
 
 def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarray:
     """Observations from the model, (E, F, W, T), theta (E, F, W, 4) with log
-    sigma, lam (E, W, T, 3)."""
+    sigma, lam (E, W, T, 4)."""
     mu = predict(theta, lam, data)
     sd = np.exp(theta[..., 3:4]) * (mu + data.floor[None, :, None, None])
     return mu + sd * rng.standard_normal(mu.shape)

@@ -51,7 +51,7 @@ def test_frame_prior_is_the_documented_mixture():
         np.zeros(1),
     )
     x = np.linspace(-12, 6, 20001)
-    lam = np.zeros((len(x), 3))
+    lam = np.zeros((len(x), 4))
     lam[:, 1] = x
     dens = np.exp(il.log_prior_frames(lam, data) - 0.5 * np.log(2 * np.pi))
     # the sun's prior, without 1/sqrt(2 pi), integrates to 1 (the sky at its mode adds 0)
@@ -67,11 +67,9 @@ def test_joint_model_finds_two_clouded_frames(paper_split):
     full, _, up = paper_split
     rng = np.random.default_rng(7)
     facets = np.arange(full.diffuse.shape[1])
-    bases = il.IlluminationBases(
-        full.diffuse[:, facets][..., up], full.glossy[:, facets][..., up], full.exponents
-    )
+    bases = full.take(facets, up)
     f, t = bases.diffuse.shape[1:]
-    lam = np.zeros((1, 1, t, 3))
+    lam = np.zeros((1, 1, t, 4))
     lam[..., 1], lam[..., 2] = np.log(0.9), np.log(1.2)
     clouded = [5, 9]
     lam[0, 0, clouded, 1], lam[0, 0, clouded, 2] = np.log(0.05), np.log(1.8)
@@ -99,9 +97,7 @@ def test_joint_model_finds_two_clouded_frames(paper_split):
 
 def test_known_exposure_is_fixed_and_unknown_is_inferred(paper_split):
     full, _, up = paper_split
-    bases = il.IlluminationBases(
-        full.diffuse[:, :6][..., up], full.glossy[:, :6][..., up], full.exponents
-    )
+    bases = full.take(slice(0, 6), up)
     t = bases.diffuse.shape[-1]
     y = np.ones((6, t))
     known = il.joint_data(y, np.ones((6, t), bool), bases, exposure=2.0 ** np.arange(t))
@@ -109,12 +105,12 @@ def test_known_exposure_is_fixed_and_unknown_is_inferred(paper_split):
     # stored relative to the mean log: only ratios matter
     np.testing.assert_allclose(np.diff(known.log_exposure), np.log(2.0))
     free = il.joint_data(y, np.ones((6, t), bool), bases)
-    lam = np.zeros((1, 1, t, 3))
+    lam = np.zeros((1, 1, t, 4))
     lam[..., 0] = 1.0
     # the same latents predict e x more with a free exposure, ignore it when known
     th = np.zeros((1, 6, 1, 3))
     th[..., 0], th[..., 1] = 0.3, 2.0
-    ratio = il.predict(th, lam, free) / il.predict(th, lam * [0, 1, 1], free)
+    ratio = il.predict(th, lam, free) / il.predict(th, lam * [0, 1, 1, 1], free)
     np.testing.assert_allclose(ratio, np.e)
     with pytest.raises(ValueError, match="positive"):
         il.joint_data(y, np.ones((6, t), bool), bases, exposure=-np.ones(t))
@@ -131,9 +127,7 @@ def _sbc_ranks(paper_split, n_rep, seed, n_draws=99):
     full, total, up = paper_split
     frames = np.flatnonzero(up)[2:-2][::2][:8]
     facets = np.linspace(0, full.diffuse.shape[1] - 1, 8).round().astype(int)
-    bases = il.IlluminationBases(
-        full.diffuse[:, facets][..., frames], full.glossy[:, facets][..., frames], full.exponents
-    )
+    bases = full.take(facets, frames)
     f, t = bases.diffuse.shape[1:]
     valid = np.ones((f, t), bool)
     ref = il.joint_data(

@@ -74,8 +74,9 @@ class JointSamples:
         Facets' gamma, log n, log s, log sigma; F facets, E ensembles, S
         draws each (each walker's trajectory thinned evenly, walkers one
         after another).
-    frames : ndarray (E, S, T, 3)
-        Each frame's (log e, log a, log b) at the same draws.
+    frames : ndarray (E, S, T, 4)
+        Each frame's latents (:data:`bayesgloss.illumination.LATENTS`) at
+        the same draws.
     rhat, ess_bulk, ess_tail : ndarray (F + 2 T,)
         Diagnostics of gamma per facet, then log a and log b per frame.
     converged : bool
@@ -106,14 +107,14 @@ class _JointChain:
         self.f, self.t = data.shape
         self.cd = data.curve_data()
         self.tables = data.tables
-        lam0 = starting_frames(data)  # (T, 3)
+        lam0 = starting_frames(data)  # (T, 4)
         start = initial_ensemble(
             _curve_data_at(data, lam0).take(np.tile(np.arange(self.f), self.e)), n_walkers, rng
         )
         self.th = np.ascontiguousarray(start[..., :3]).reshape(self.e, self.f, self.w, 3)
         self.level = np.zeros((self.e, self.w))
-        self.free = np.array([not data.exposure_known, True, True])
-        self.lam = lam0 + 0.05 * rng.standard_normal((self.e, self.w, self.t, 3)) * self.free
+        self.free = data.free
+        self.lam = lam0 + 0.05 * rng.standard_normal((self.e, self.w, self.t, 4)) * self.free
         self.ensemble = BatchedEnsemble(self._log_prob, DEFAULT_MOVES, rng, pass_walkers=True)
         self.log_p = self._log_prob(self._coords(), np.arange(self.w))
         q = data.priors.log_s_sd
@@ -200,7 +201,7 @@ class _JointChain:
         for k in (0, 1):
             idx, cidx = halves[k], halves[1 - k]
             ref = np.broadcast_to(self.lam[:, cidx].mean(1, keepdims=True), self.lam[:, idx].shape)
-            sub = (parts[0][:, :, idx], parts[1][:, :, idx])
+            sub = tuple(p[:, :, idx] for p in parts)
             chol = self._proposal_factor(th[:, :, idx], ref, sub, log_sigma[:, :, idx])
             scale = 2.38 / np.sqrt(d) * (0.3 if rng.random() < 0.3 else 1.0)
             z = rng.standard_normal(chol.shape[:-1])
@@ -213,29 +214,30 @@ class _JointChain:
 
     def _proposal_factor(self, th, lam_ref, parts, log_sigma):
         """Cholesky factor of the inverse of the frame latents' Fisher
-        information plus the priors' Gaussian precisions, (E, H, T, 3, 3)."""
+        information plus the priors' Gaussian precisions, (E, H, T, 4, 4)."""
         data = self.data
-        ea, eb = il._frame_factors(lam_ref, data)
+        weights = il.frame_weights(lam_ref, data)
         s = np.exp(th[..., 2:3])
-        mu_a, mu_b = s * ea * parts[0], s * eb * parts[1]  # (E, F, H, T)
-        v = mu_a + mu_b + data.floor[None, :, None, None]
+        mu_s, mu_a, mu_b = (s * w * p for w, p in zip(weights, parts, strict=True))
+        v = mu_s + mu_a + mu_b + data.floor[None, :, None, None]
         weight = (np.exp(-2 * log_sigma)[..., None] + 2.0) / v**2 * data.valid[None, :, None, :]
-        # d mu / d (log e, log a, log b) = (mu_a + mu_b, mu_a, mu_b)
-        aa = np.sum(weight * mu_a * mu_a, axis=1)
-        ab = np.sum(weight * mu_a * mu_b, axis=1)
-        bb = np.sum(weight * mu_b * mu_b, axis=1)
-        ea_, eb_ = aa + ab, ab + bb
-        info = np.stack(
-            [
-                np.stack([ea_ + eb_, ea_, eb_], -1),
-                np.stack([ea_, aa, ab], -1),
-                np.stack([eb_, ab, bb], -1),
-            ],
-            -2,
-        )
+        wb = il.special.expit(lam_ref[..., 3])[:, None] if data.shapes == 2 else 0.5
+        # d mu / d (log e, log a, log b, logit w)
+        grads = np.stack(
+            [mu_s + mu_a + mu_b, mu_s, mu_a + mu_b, (1 - wb) * mu_b - wb * mu_a], axis=-1
+        )  # (E, F, H, T, 4)
+        g = np.moveaxis(grads, 1, -2)  # (E, H, T, F, 4)
+        info = np.swapaxes(g * np.moveaxis(weight, 1, -1)[..., None], -1, -2) @ g
         fp = data.frame_priors
-        e_prec = 1e12 if data.exposure_known else 1.0 / fp.exposure_sd**2
-        info += np.diag([e_prec, 1.0 / fp.sun_cloud_sd**2, 1.0 / fp.sky_sd**2])
+        fixed = 1e12
+        info += np.diag(
+            [
+                fixed if data.exposure_known else 1.0 / fp.exposure_sd**2,
+                1.0 / fp.sun_cloud_sd**2,
+                1.0 / fp.sky_sd**2,
+                1.0 / 1.8**2 if data.shapes == 2 else fixed,
+            ]
+        )
         return np.linalg.cholesky(np.linalg.inv(info))
 
     # -- collective moves: along the directions Gibbs is slow in ----------------
@@ -314,13 +316,13 @@ class _JointChain:
 
     def _exposure_ridge(self) -> None:
         c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
-        prop = self.lam + c[..., None] * np.array([1.0, -1.0, -1.0])
+        prop = self.lam + c[..., None] * np.array([1.0, -1.0, -1.0, 0.0])
         ratio = il.log_prior_frames(prop, self.data) - il.log_prior_frames(self.lam, self.data)
         ok = np.log(self.rng.random(ratio.shape)) < ratio
         self.lam = np.where(ok[..., None], prop, self.lam)
 
     def _scale_ridge(self, tries: int = 3) -> None:
-        shift = np.array([0.0, 1.0, 1.0]) if self.data.exposure_known else np.array([1.0, 0, 0])
+        shift = np.array([0.0, 1, 1, 0]) if self.data.exposure_known else np.array([1.0, 0, 0, 0])
         for _ in range(tries):
             c = self.scale_step * self.rng.standard_normal((self.e, self.w))
             th = self.theta
@@ -340,16 +342,20 @@ class _JointChain:
 
 
 def _curve_data_at(data: il.JointData, lam) -> lk.CurveData:
-    """The facets alone with every frame's latents fixed at ``lam`` (T, 3)."""
-    log_e = lam[:, 0] if data.log_exposure is None else data.log_exposure
-    ea, eb = np.exp(log_e + lam[:, 1]), np.exp(log_e + lam[:, 2])
+    """The facets alone with every frame's latents fixed at ``lam`` (T, 4)."""
+    weights = np.stack(
+        [
+            np.broadcast_to(w[0, 0, 0], lam.shape[:1])
+            for w in il.frame_weights(lam[None, None], data)
+        ]
+    )  # (3, T)
     cd = data.curve_data()
     return lk.CurveData(
         cd.y,
         cd.valid,
         cd.censored,
-        ea * data.diffuse[0] + eb * data.diffuse[1],
-        ea * data.glossy[0] + eb * data.glossy[1],
+        np.sum(weights[:, None] * data.diffuse, axis=0),
+        np.sum(weights[:, None, None] * data.glossy, axis=0),
         cd.log_n_grid,
         cd.log_s_center,
         priors=cd.priors,
@@ -357,18 +363,19 @@ def _curve_data_at(data: il.JointData, lam) -> lk.CurveData:
 
 
 def starting_frames(data: il.JointData, rounds: int = 8) -> np.ndarray:
-    """A start for every frame's latents near the joint optimum, (T, 3).
+    """A start for every frame's latents near the joint optimum, (T, 4).
 
     Alternates least squares: the facets' best (gamma, n, s) on the
     exponent table given the frames (:func:`node_fits`), then each frame's
     e a and e b by non-negative weighted least squares over the facets
-    given them (weights 1 / (y + c)^2, the relative noise), ``rounds``
-    times, from the sky model's brightness. Without it the sampler would
+    given them (weights 1 / (y + c)^2, the relative noise; the sky's shape
+    the even mixture, w = 1/2), ``rounds`` times, from the sky model's
+    brightness. Without it the sampler would
     spend its burn-in carrying all facets' gloss and the frames' brightness
     together from the model's brightness to theirs.
     """
     f, t = data.shape
-    lam = np.zeros((t, 3))
+    lam = np.zeros((t, 4))
     w = np.where(data.valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
     for _ in range(rounds):
         cd = _curve_data_at(data, lam)
@@ -379,8 +386,9 @@ def starting_frames(data: il.JointData, rounds: int = 8) -> np.ndarray:
         th = np.zeros((1, f, 1, 3))
         th[..., 0] = gamma[None, :, None]
         th[..., 1] = data.log_n_grid[best][None, :, None]
-        u, v = il.unit_parts(th, data)
-        u, v = s[:, None] * u[0, :, 0], s[:, None] * v[0, :, 0]  # (F, T)
+        parts = il.unit_parts(th, data)
+        u = s[:, None] * parts[0][0, :, 0]  # (F, T)
+        v = s[:, None] * 0.5 * (parts[1] + parts[2])[0, :, 0]
         # 2 x 2 normal equations of y_ft = x u_ft + z v_ft per frame
         uu, uv, vv = (w * u * u).sum(0), (w * u * v).sum(0), (w * v * v).sum(0)
         uy, vy = (w * u * data.y).sum(0), (w * v * data.y).sum(0)
@@ -405,11 +413,11 @@ def starting_frames(data: il.JointData, rounds: int = 8) -> np.ndarray:
 
 def _diagnosed(th_kept, lam_kept):
     """(rhat, ess_bulk, ess_tail, ok) of gamma per facet and log a, log b per
-    frame, for kept chains (n, E, F, W, 3) and (n, E, W, T, 3)."""
+    frame, for kept chains (n, E, F, W, 3) and (n, E, W, T, 4)."""
     n, e, f, w, _ = th_kept.shape
     t = lam_kept.shape[3]
     gamma = th_kept[..., 0].transpose(2, 1, 3, 0).reshape(f, e, w * n)
-    lat = lam_kept[..., 1:].transpose(4, 3, 1, 2, 0).reshape(2 * t, e, w * n)  # a's, then b's
+    lat = lam_kept[..., 1:3].transpose(4, 3, 1, 2, 0).reshape(2 * t, e, w * n)  # a's, then b's
     return diagnostics.diagnose(np.concatenate([gamma, lat]).astype(float))
 
 
@@ -478,7 +486,7 @@ def sample_joint(
                 break
     half = len(th_kept) // 2
     th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, 3)
-    lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, 3)
+    lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, 4)
     if diag is None:
         diag = _diagnosed(th, lam)
     n = len(th)
@@ -488,7 +496,7 @@ def sample_joint(
     e, f, w = n_ensembles, data.shape[0], n_walkers
     # (m, E, F, W, 3) -> (F, E, W m, 3), walkers one after another
     draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, 3)
-    frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], 3)
+    frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], 4)
     # log sigma from its conditional at every draw
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
     _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
