@@ -577,7 +577,7 @@ def _cie_sky_text(
     )
     sky_type = int(model.split("-")[1])
     gradation, indicatrix, _ = sky.CIE_SKY_TYPES[sky_type]
-    a, b = sky._CIE_GRADATION[gradation]
+    a, b = sky._CIE_GRADATION[gradation]  # the standard's Table 1, as sky.cie_general reads it
     c, d, e = sky._CIE_INDICATRIX[indicatrix]
     zenith = float(day_sky.parameters.zenith_radiance[0])
     ground = float(day_sky.ground_radiance[0])

@@ -363,9 +363,25 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     return out
 
 
+def sky_category(config: sequences.SequenceConfig) -> str:
+    """The sky's category, also for auto-exposure sequences (whose category is
+    "auto-exposure"): gensky-*, cie-general, broken-cloud (Perez with given
+    irradiances), perez-hazy (Linke turbidity >= 7) or perez-clear."""
+    if config.sky.startswith("gensky-"):
+        return config.sky
+    if config.sky.startswith("cie-"):
+        return "cie-general"
+    if config.dni is not None:
+        return "broken-cloud"
+    return "perez-hazy" if config.linke_turbidity >= 7.0 else "perez-clear"
+
+
 def configs_json(configs) -> str:
-    """The drawn set as JSON text: name, key and every field of each sequence."""
-    rows = [{"name": c.name, "key": c.key(), "config": c.to_dict()} for c in configs]
+    """The drawn set as JSON text: name, key, sky category and every field of each sequence."""
+    rows = [
+        {"name": c.name, "key": c.key(), "sky_category": sky_category(c), "config": c.to_dict()}
+        for c in configs
+    ]
     return json.dumps({"n_sequences": len(rows), "sequences": rows}, indent=1) + "\n"
 
 
@@ -382,6 +398,7 @@ def composition(configs) -> dict:
     sun_up = [int(np.sum(c.sun_directions()[:, 2] > 0.0)) for c in configs]
     return {
         "category": count(c.category for c in configs),
+        "sky_category": count(sky_category(c) for c in configs),
         "sky": count(c.sky for c in configs),
         "pixel_encoding": count(c.pixel_encoding for c in configs),
         "shape": count(c.shape for c in configs),
