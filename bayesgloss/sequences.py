@@ -403,29 +403,43 @@ class SequenceConfig:
         return dni, dhi
 
     def truth(self) -> dict:
-        """What made the bundle (the camera's gains and white are added when written)."""
-        rho = self.colour_luminance()
-        irr = self.irradiances()
-        name, _ = images.parse_pixel_encoding(self.pixel_encoding)
+        """What made the scene: material, colour, sky, the true gloss and the config.
+
+        The keys are those of the first bundles (saved results compare them);
+        :meth:`bundle_truth` adds the rest.
+        """
         return {
             "material": self.material,
             "colour": self.colour,
-            "colour_luminance": rho,
             "specularity": self.specularity,
             "roughness": self.roughness,
             "sky": self.sky,
+            "renderer": "radiance",
+            "gloss": float(
+                reflectance.gloss_of_radiance_material(
+                    self.material, self.specularity, self.colour_luminance()
+                )
+            ),
+            "config": self.to_dict(),
+        }
+
+    def bundle_truth(self) -> dict:
+        """:meth:`truth` and everything else written to a bundle's ``truth``:
+        category, shape, colour luminance, per-frame DNI and DHI (perez and
+        cie-N), pixel encoding, bit depth and sensor noise (the exposure gains
+        and the white are added when the frames are written)."""
+        irr = self.irradiances()
+        name, _ = images.parse_pixel_encoding(self.pixel_encoding)
+        return {
+            **self.truth(),
             "category": self.category if self.category is not None else self.sky,
+            "shape": self.shape,
+            "colour_luminance": self.colour_luminance(),
             "dni": None if irr is None else [float(v) for v in irr[0]],
             "dhi": None if irr is None else [float(v) for v in irr[1]],
             "pixel_encoding": self.pixel_encoding,
             "bit_depth": None if name == "linear-radiance" else self._bit_depth(),
             "sensor_noise": self.sensor_noise,
-            "shape": self.shape,
-            "renderer": "radiance",
-            "gloss": float(
-                reflectance.gloss_of_radiance_material(self.material, self.specularity, rho)
-            ),
-            "config": self.to_dict(),
         }
 
     def _bit_depth(self) -> int:
@@ -731,7 +745,7 @@ def _write_group(plan, cache_dir: Path, bundle_io) -> None:
             frame_format = "hdr"
         else:
             frame_format = "png8" if config._bit_depth() == 8 else "png16"
-        truth = config.truth()
+        truth = config.bundle_truth()
         truth["exposure"] = None if gains is None else [float(g) for g in gains]
         truth["exposure_written"] = gains is not None and name == "linear-radiance"
         truth["white"] = white
