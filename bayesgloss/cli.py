@@ -281,12 +281,13 @@ def _estimate_many(args, progress) -> int:
             Path(b).name,
             {
                 "bundle": str(Path(b).resolve()),
-                "illumination": args.sky,
-                "per_frame": args.per_frame,
+                "illumination": args.sky or ("auto" if args.per_frame else "gensky-clear"),
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
                 "max_steps": args.max_steps,
+                # only where set, so that other runs keep their units' keys
+                **({"per_frame": True} if args.per_frame else {}),
             },
         )
         for b in args.bundle

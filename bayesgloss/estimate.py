@@ -378,6 +378,8 @@ def estimate_bundle(
             used,
             {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"},
         )
+    if b.exposure is not None:  # frames[].exposure: pixel = exposure x radiance
+        y = y / (b.exposure / np.exp(np.mean(np.log(b.exposure))))
     bases = bundle_bases(b, illumination)
     sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
     data = lk.curve_data(
