@@ -154,7 +154,9 @@ def posterior_report(
 
     fig = plt.figure(figsize=(15, 14.5), constrained_layout=True)
     grid = fig.add_gridspec(3, 4, height_ratios=[1, 1, 1.15])
+    # the brightest frame, as the bundle numbers it (a joint model keeps a subset)
     t_mid = int(np.argmax(np.nansum(idata.observed_data["y"].values, axis=0)))
+    t_mid = int(idata.observed_data["frame"].values[t_mid])
     frame, _ = bundle.linear_frame(t_mid)
     crop = _crop(bundle.labels)
     ax = fig.add_subplot(grid[0, 0])
@@ -234,7 +236,10 @@ def posterior_report(
     )
     ax.set_title(f"(f) converged: {conv.sum()}/{len(conv)} (green)", fontsize=9)
     _corner(fig, grid[2, :2], idata, pick[1], plt)
-    _comparison_table(fig.add_subplot(grid[2, 2:]), comparison)
+    if comparison is None and "sun" in idata.posterior:
+        _illumination_panel(fig.add_subplot(grid[2, 2:]), idata)
+    else:
+        _comparison_table(fig.add_subplot(grid[2, 2:]), comparison)
     fig.suptitle(
         title
         or f"{Path(str(bundle.path)).name}: posterior gloss "
@@ -245,6 +250,25 @@ def posterior_report(
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def _illumination_panel(ax, idata) -> None:
+    """(h) each frame's inferred sun and sky brightness (relative to the sky
+    model's), and exposure where it was unknown: medians and 90 % intervals."""
+    frames = idata.posterior["frame"].values
+    styles = {"sun": "tab:orange", "sky": "tab:blue", "exposure": "0.4", "overcast": "tab:purple"}
+    for name, colour in styles.items():
+        if name not in idata.posterior:
+            continue
+        x = idata.posterior[name].values.reshape(-1, len(frames))
+        lo, mid, hi = np.quantile(x, [0.05, 0.5, 0.95], axis=0)
+        label = "overcast weight" if name == "overcast" else f"{name} (x model)"
+        ax.fill_between(frames, lo, hi, color=colour, alpha=0.2)
+        ax.plot(frames, mid, "o-", color=colour, ms=3, label=label)
+    ax.set_yscale("log")
+    ax.set(xlabel="frame", ylabel="relative to the sky model [-]")
+    ax.set_title("(h) each frame's illumination, inferred with the facets (90 %)", fontsize=9)
+    ax.legend(fontsize=8)
 
 
 def format_comparison(res: dict, name, level: str = "object") -> str:
