@@ -267,6 +267,7 @@ class _Manifest(NamedTuple):
     facets: Facets
     truth: dict | None
     exposure: np.ndarray | None
+    irradiance: np.ndarray
 
 
 def _is_number(value: Any) -> bool:
@@ -309,6 +310,28 @@ class _Checker:
         if len(value) != 3 or not all(_is_number(v) for v in value):
             raise self.fail(f"{where}.{key}", f"must be 3 finite numbers, got {value!r}")
         return np.array(value, dtype=float)
+
+
+#: Keys of ``frames[].irradiance``, in the order of :attr:`Bundle.irradiance`'s columns.
+IRRADIANCE_KEYS = ("ghi", "dni", "dhi")
+
+
+def _parse_irradiance(check: _Checker, frame: Mapping, where: str) -> list[float]:
+    """(GHI, DNI, DHI) of ``frames[i].irradiance``, NaN where absent [W m^-2]."""
+    value = check.get(frame, "irradiance", where, dict, required=False)
+    out = [math.nan] * 3
+    if value is None:
+        return out
+    for k, key in enumerate(IRRADIANCE_KEYS):
+        x = check.get(value, key, f"{where}.irradiance", float, required=False)
+        if x is not None and x < 0:
+            raise check.fail(f"{where}.irradiance.{key}", f"must be >= 0 W m^-2, got {x!r}")
+        out[k] = math.nan if x is None else x
+    if all(math.isnan(x) for x in out):
+        raise check.fail(
+            f"{where}.irradiance", f"holds none of {', '.join(IRRADIANCE_KEYS)}: {value!r}"
+        )
+    return out
 
 
 def _parse_time(check: _Checker, value: Any, name: str) -> pd.Timestamp:
@@ -357,7 +380,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     frames = check.get(manifest, "frames", "", list)
     if not frames:
         raise check.fail("frames", "the frame list is empty")
-    files, times, exposures = [], [], []
+    files, times, exposures, irradiance = [], [], [], []
     for i, frame in enumerate(frames):
         where = f"frames[{i}]"
         if not isinstance(frame, dict):
@@ -373,6 +396,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         if exposure is not None and not exposure > 0:
             raise check.fail(f"{where}.exposure", f"must be a positive number, got {exposure!r}")
         exposures.append(exposure)
+        irradiance.append(_parse_irradiance(check, frame, where))
     given = [e is not None for e in exposures]
     if any(given) and not all(given):
         i = given.index(False)
@@ -420,6 +444,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         facets,
         truth,
         np.array(exposures, dtype=float) if all(given) else None,
+        np.array(irradiance, dtype=float).reshape(-1, 3),
     )
 
 
@@ -522,6 +547,9 @@ class Bundle:
     exposure : ndarray (T,) or None
         ``frames[].exposure``: each frame's relative exposure (a linear
         factor, any common scale), or None where the manifest gives none.
+    irradiance : ndarray (T, 3)
+        ``frames[].irradiance``: measured GHI, DNI and DHI of each frame,
+        W m^-2; NaN where not given.
     """
 
     path: Path
@@ -540,6 +568,7 @@ class Bundle:
     sun_direction: np.ndarray = field(repr=False)
     truth: dict | None = field(repr=False, default=None)
     exposure: np.ndarray | None = field(repr=False, default=None)
+    irradiance: np.ndarray | None = field(repr=False, default=None)
 
     def __len__(self) -> int:
         return len(self.times)
@@ -758,6 +787,7 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         sun_direction=_sun.sun_direction(zenith, azimuth),
         truth=parsed.truth,
         exposure=parsed.exposure,
+        irradiance=parsed.irradiance,
     )
 
 

@@ -281,7 +281,7 @@ def _estimate_many(args, progress) -> int:
             Path(b).name,
             {
                 "bundle": str(Path(b).resolve()),
-                "illumination": args.sky or ("auto" if args.per_frame else "gensky-clear"),
+                "illumination": args.sky,  # None: measured, auto or gensky-clear
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
@@ -400,10 +400,11 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--sky",
         default=None,
-        choices=("auto", *sky.sky_models()),
+        choices=("auto", "measured", *sky.sky_models()),
         metavar="SKY",
-        help="the sky's shape (default: gensky-clear; with --per-frame 'auto', each frame's "
-        "sky a mixture of gensky's clear and overcast skies; one of "
+        help="the sky's shape (default: 'measured', the Perez sky of the bundle's "
+        "frames[].irradiance, where it has them; else gensky-clear, or with --per-frame "
+        "'auto', each frame's sky a mixture of gensky's clear and overcast skies; one of "
         + ", ".join(sky.sky_models())
         + ")",
     )

@@ -56,6 +56,7 @@ from . import diagnostics, render, sampling, sky
 from . import illumination as il
 from . import likelihood as lk
 from ._thirdparty import arviz
+from .irradiance import measured_sky
 from .pool import process_pool
 from .pooling import population_gloss, shared_gloss
 from .results import (
@@ -77,6 +78,7 @@ __all__ = [
     "MIN_FRAMES",
     "estimate_unit",
     "bundle_bases",
+    "bundle_sky",
     "observations",
     "EstimateResult",
     "estimate_bundle",
@@ -90,6 +92,20 @@ ILLUMINATION_MODELS = sky.sky_models()
 MIN_FRAMES = 4
 
 
+def bundle_sky(b, illumination: str, ground_reflectance: float):
+    """The sky of a bundle's frames: a sky model by name, or ``"measured"``,
+    the Perez sky of its ``frames[].irradiance`` (:func:`bayesgloss.irradiance.measured_sky`)."""
+    if illumination == "measured":
+        day = measured_sky(b, ground_reflectance)
+        if day is None:
+            raise ValueError(
+                f"bundle '{b.path}': illumination 'measured' needs frames[].irradiance "
+                "(DNI and DHI, or GHI) for every frame with the sun up"
+            )
+        return day
+    return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
+
+
 def bundle_bases(
     b, illumination: str = "gensky-clear", *, exponents=render.DEFAULT_EXPONENTS, occluder=None
 ) -> render.FacetBases:
@@ -98,12 +114,13 @@ def bundle_bases(
     The sky model sees the bundle's ground reflectance (0.2 if absent) and a
     ground plane (``"point-sun"``: nothing but the sun).
     """
-    if illumination not in ILLUMINATION_MODELS:
+    if illumination not in (*ILLUMINATION_MODELS, "measured"):
         raise ValueError(
-            f"unknown illumination {illumination!r}; valid: {', '.join(ILLUMINATION_MODELS)}"
+            f"unknown illumination {illumination!r}; valid: {', '.join(ILLUMINATION_MODELS)}, "
+            "measured"
         )
     rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
-    day = sky.daylight(illumination, b.sun_direction, ground_reflectance=rho)
+    day = bundle_sky(b, illumination, rho)
     ground = "sky" if illumination == "point-sun" else "plane"
     return render.facet_bases(
         b.view_geometry(occluder), day, exponents, ground=ground, ground_reflectance=rho
@@ -215,10 +232,8 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     az = arviz()
     rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
     first, second = AUTO_SKIES if illumination == "auto" else (illumination, None)
-    day = sky.daylight(first, b.sun_direction, ground_reflectance=rho)
-    other = (
-        None if second is None else sky.daylight(second, b.sun_direction, ground_reflectance=rho)
-    )
+    day = bundle_sky(b, first, rho)
+    other = None if second is None else bundle_sky(b, second, rho)
     ground = "sky" if illumination == "point-sun" else "plane"
     ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
     used = ok.any(axis=0) & b.sun_up
@@ -317,10 +332,12 @@ def estimate_bundle(
     ----------
     path : path or bundle.Bundle
     illumination : str, optional
-        The sky's shape: one of :data:`ILLUMINATION_MODELS`, or ``"auto"``
+        The sky's shape: one of :data:`ILLUMINATION_MODELS`; ``"measured"``,
+        the Perez sky of the bundle's ``frames[].irradiance``; or ``"auto"``
         (with ``per_frame`` only: each frame's sky a mixture of
-        :data:`AUTO_SKIES`, its weight inferred). Default: ``"auto"`` with
-        ``per_frame``, ``"gensky-clear"`` without.
+        :data:`AUTO_SKIES`, its weight inferred). Default: ``"measured"``
+        where the bundle measures every frame with the sun up, else
+        ``"auto"`` with ``per_frame`` and ``"gensky-clear"`` without.
     per_frame : bool
         Infer each frame's sun and sky brightness (and the exposure where
         the bundle does not fix it) jointly with the facets
@@ -354,8 +371,10 @@ def estimate_bundle(
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
     joint = per_frame and noise == "relative" and camera == "linear"
-    if illumination is None:
-        illumination = "auto" if joint else "gensky-clear"
+    if illumination is None:  # measured irradiance where the bundle has it
+        rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
+        measured = measured_sky(b, rho) is not None
+        illumination = "measured" if measured else "auto" if joint else "gensky-clear"
     if illumination == "auto" and not joint:
         raise ValueError(
             "illumination 'auto' (a per-frame mixture of sky shapes) needs per-frame "

@@ -774,8 +774,13 @@ def perez_coefficients(epsilon: Any, delta: Any, solar_zenith: Any) -> PerezCoef
     first = index == 0
     if np.any(first):
         base = np.maximum(dlt * (x[..., 2, 0] + x[..., 2, 1] * z), 0.0)
-        c1 = np.exp(base ** x[..., 2, 2]) - x[..., 2, 3]
-        d1 = -np.exp(dlt * (x[..., 3, 0] + x[..., 3, 1] * z)) + x[..., 3, 2] + dlt * x[..., 3, 3]
+        # computed for every entry, kept for the first bin only (other bins'
+        # coefficients may overflow here, harmlessly)
+        with np.errstate(over="ignore"):
+            c1 = np.exp(base ** x[..., 2, 2]) - x[..., 2, 3]
+            d1 = (
+                -np.exp(dlt * (x[..., 3, 0] + x[..., 3, 1] * z)) + x[..., 3, 2] + dlt * x[..., 3, 3]
+            )
         c = np.where(first, c1, c)
         d = np.where(first, d1, d)
     nan = np.isnan(eps) | np.isnan(dlt) | np.isnan(z)
