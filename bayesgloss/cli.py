@@ -274,14 +274,20 @@ def _estimate_many(args, progress) -> int:
 
     if not args.out:
         raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
+    from .irradiance import measured_sky
+
+    skies = []
     for b in args.bundle:  # reject bad bundles before any work starts
-        bundle_io.read_bundle(b)
+        bundle = bundle_io.read_bundle(b)
+        # each unit names its sky: measured where the bundle has irradiance
+        default = "auto" if args.per_frame else "gensky-clear"
+        skies.append(args.sky or ("measured" if measured_sky(bundle) is not None else default))
     units = [
         (
             Path(b).name,
             {
                 "bundle": str(Path(b).resolve()),
-                "illumination": args.sky,  # None: measured, auto or gensky-clear
+                "illumination": sky_name,
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
@@ -290,7 +296,7 @@ def _estimate_many(args, progress) -> int:
                 **({"per_frame": True} if args.per_frame else {}),
             },
         )
-        for b in args.bundle
+        for b, sky_name in zip(args.bundle, skies, strict=True)
     ]
     folders = runner.run_units(
         estimate.estimate_unit,
