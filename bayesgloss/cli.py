@@ -216,12 +216,24 @@ def _estimate(args: argparse.Namespace) -> int:
                 f"\rbayesgloss estimate: {done}/{total} {what}", end="", file=sys.stderr, flush=True
             )
 
+    if args.irradiance and (len(args.bundle) > 1 or args.scheduler):
+        raise ValueError("--irradiance FILE goes with one bundle (its times)")
     if len(args.bundle) > 1 or args.scheduler:
         return _estimate_many(args, progress)
     if args.out:  # a bad --out is said before the computation, not after
         estimate.check_result_folder(args.out)
+    target = args.bundle[0]
+    if args.irradiance:  # measurements from a file, for the bundle's frame times
+        import dataclasses
+
+        from . import bundle as bundle_io
+        from .irradiance import read_irradiance_csv
+
+        target = bundle_io.read_bundle(target)
+        measured = read_irradiance_csv(args.irradiance, target.times)
+        target = dataclasses.replace(target, irradiance=measured)
     res = estimate.estimate_bundle(
-        args.bundle[0],
+        target,
         illumination=args.sky,
         noise=args.noise,
         camera=args.camera,
@@ -428,6 +440,13 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=8000,
         help="production steps at most per facet (unconverged facets are flagged)",
+    )
+    es.add_argument(
+        "--irradiance",
+        metavar="FILE",
+        help="CSV of measured irradiance (columns time, and any of ghi, dni, dhi in W m^-2; "
+        "a row for every frame's time): the sky of each frame becomes gendaylit's Perez sky "
+        "of these values",
     )
     es.add_argument(
         "--per-frame",

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import sky
 
-__all__ = ["complete_irradiance", "measured_sky"]
+__all__ = ["complete_irradiance", "measured_sky", "read_irradiance_csv", "IrradianceFileError"]
 
 
 def complete_irradiance(ghi, dni, dhi, solar_zenith, day_of_year):
@@ -37,7 +37,9 @@ def complete_irradiance(ghi, dni, dhi, solar_zenith, day_of_year):
     -------
     dni, dhi : ndarray (T,)
         [W m^-2]; 0 with the sun at or below the horizon; NaN where neither
-        two values nor GHI were given (DNI alone or DHI alone).
+        two values nor GHI were given (DNI alone or DHI alone). DNI is
+        capped at the solar constant (closure at a low sun divides the
+        sensors' GHI - DHI by a small cos z).
     """
     import pvlib
 
@@ -57,7 +59,9 @@ def complete_irradiance(ghi, dni, dhi, solar_zenith, day_of_year):
         split = pvlib.irradiance.erbs(ghi[only_ghi], zenith[only_ghi], day[only_ghi])
         dni[only_ghi] = np.asarray(split["dni"], dtype=float)
         dhi[only_ghi] = np.asarray(split["dhi"], dtype=float)
-    dni = np.where(up, dni, 0.0)
+    # closure at a low sun amplifies the GHI - DHI of real sensors: no DNI
+    # above the solar constant (gendaylit rejects it)
+    dni = np.where(up, np.minimum(dni, sky.SOLAR_CONSTANT), 0.0)
     dhi = np.where(up, dhi, 0.0)
     return dni, dhi
 
@@ -97,3 +101,77 @@ def measured_sky(bundle, ground_reflectance: float = 0.2):
         day_of_year=day.astype(int),
         ground_reflectance=ground_reflectance,
     )
+
+
+class IrradianceFileError(ValueError):
+    """A bad irradiance file: names the file, the row or column, and the problem."""
+
+
+def read_irradiance_csv(path, times) -> np.ndarray:
+    """Measured irradiance of the frames from a time-indexed CSV file.
+
+    The file has a ``time`` column (ISO 8601 with a UTC offset) and any of
+    ``ghi``, ``dni``, ``dhi`` [W m^-2]; every frame's time must be in it
+    (compared as instants). Empty cells are not measured.
+
+    Parameters
+    ----------
+    path : path
+    times : pandas.DatetimeIndex
+        The frames' times, tz-aware.
+
+    Returns
+    -------
+    ndarray (T, 3)
+        GHI, DNI, DHI of each frame; NaN where not measured [W m^-2].
+
+    Raises
+    ------
+    IrradianceFileError
+        Unreadable file, no ``time`` column or none of the irradiance
+        columns, a time without a UTC offset, a negative or non-numeric
+        value, or a frame time the file does not hold.
+    """
+    import pandas as pd
+
+    def fail(where, problem):
+        return IrradianceFileError(f"irradiance file '{path}': {where}: {problem}")
+
+    try:
+        table = pd.read_csv(path, dtype=str, skipinitialspace=True)
+    except Exception as err:
+        raise fail("file", f"cannot read it as CSV: {err}") from None
+    table.columns = [str(c).strip().lower() for c in table.columns]
+    if "time" not in table.columns:
+        raise fail("columns", f"no 'time' column (got {', '.join(table.columns)})")
+    keys = [k for k in ("ghi", "dni", "dhi") if k in table.columns]
+    if not keys:
+        raise fail("columns", "none of ghi, dni, dhi")
+    stamps = []
+    for i, text in enumerate(table["time"]):
+        try:
+            t = pd.Timestamp(str(text).strip())
+        except Exception:
+            raise fail(f"row {i + 2}, time", f"not an ISO 8601 time: {text!r}") from None
+        if t.tzinfo is None:
+            raise fail(f"row {i + 2}, time", f"{text!r} has no UTC offset")
+        stamps.append(t.tz_convert("UTC"))
+    index = pd.DatetimeIndex(stamps)
+    values = np.full((len(table), 3), np.nan)
+    for k, key in enumerate(("ghi", "dni", "dhi")):
+        if key not in keys:
+            continue
+        cells = table[key].fillna("").str.strip()
+        num = pd.to_numeric(cells.where(cells != "", None), errors="coerce").to_numpy(float)
+        bad = (cells != "") & ~np.isfinite(num) | (num < 0)
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise fail(f"row {i + 2}, {key}", f"must be a number >= 0 W m^-2, got {cells[i]!r}")
+        values[:, k] = num
+    out = np.full((len(times), 3), np.nan)
+    position = {t: i for i, t in enumerate(index)}
+    for j, t in enumerate(times.tz_convert("UTC")):
+        if t not in position:
+            raise fail("time", f"holds no row for frame {j} at {t.isoformat()}")
+        out[j] = values[position[t]]
+    return out

@@ -80,3 +80,38 @@ def test_bad_or_partial_irradiance(tmp_path):
         warnings.simplefilter("always")
         assert irradiance.measured_sky(b) is None
     assert any("not used" in str(w.message) for w in caught)
+
+
+def test_irradiance_csv_on_the_command_line(tmp_path):
+    # a CSV for the bundle's frames becomes the sky; bad files are one line each
+    import subprocess
+    import sys
+
+    path = make_synthetic_bundle(tmp_path / "b", seed=5)
+    b = bundle_io.read_bundle(path)
+    local = b.times.tz_convert("Etc/GMT-2")  # the file may use any offset
+    rows = ["time,ghi,dhi"] + [
+        f"{t.isoformat()},{600 if up else 0},{120 if up else 0}"
+        for t, up in zip(local, b.sun_up, strict=True)
+    ]
+    good = tmp_path / "irr.csv"
+    good.write_text("\n".join(rows) + "\n")
+    got = irradiance.read_irradiance_csv(good, b.times)
+    np.testing.assert_allclose(got[:, 0], np.where(b.sun_up, 600, 0))
+    assert np.all(np.isnan(got[:, 1]))
+    cmd = [sys.executable, "-m", "bayesgloss.cli", "estimate", str(path), "--json", "--quiet"]
+    run = subprocess.run(
+        [*cmd, "--irradiance", str(good), "--max-steps", "300"], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["illumination"] == "measured"
+    for text, message in [
+        ("\n".join(rows[:-1]) + "\n", "holds no row for frame"),
+        ("\n".join(rows).replace(",600,", ",-3,", 1) + "\n", ", ghi: must be a number"),
+        ("when,ghi\n", "no 'time' column"),
+    ]:
+        bad = tmp_path / "bad.csv"
+        bad.write_text(text)
+        run = subprocess.run([*cmd, "--irradiance", str(bad)], capture_output=True, text=True)
+        assert run.returncode == 2 and message in run.stderr, run.stderr
+        assert "Traceback" not in run.stderr and len(run.stderr.strip().splitlines()) == 1
