@@ -584,6 +584,11 @@ class Bundle:
         return self.solar_zenith < 90.0
 
     @property
+    def ground_albedo(self) -> float:
+        """``ground_reflectance``, or 0.2 (gensky's default) where the bundle gives none."""
+        return 0.2 if self.ground_reflectance is None else float(self.ground_reflectance)
+
+    @property
     def exposure_known(self) -> bool:
         """Whether frames share a known exposure: ``frames[].exposure`` given,
         or radiance itself (``linear-radiance``). Otherwise the spec lets the

@@ -271,7 +271,7 @@ def comparison_model(
 
 
 def _daylight(b, illumination: str):
-    rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
+    rho = b.ground_albedo
     if illumination == "point-sun":
         return sky.daylight(illumination, b.sun_direction), "sky", rho
     return sky.daylight(illumination, b.sun_direction, ground_reflectance=rho), "plane", rho

@@ -119,7 +119,7 @@ def bundle_bases(
             f"unknown illumination {illumination!r}; valid: {', '.join(ILLUMINATION_MODELS)}, "
             "measured"
         )
-    rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
+    rho = b.ground_albedo
     day = bundle_sky(b, illumination, rho)
     ground = "sky" if illumination == "point-sun" else "plane"
     return render.facet_bases(
@@ -230,7 +230,7 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     (:mod:`bayesgloss.illumination`) on the usable facets and the frames
     any of them sees: (idata, samples, frames used)."""
     az = arviz()
-    rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
+    rho = b.ground_albedo
     first, second = AUTO_SKIES if illumination == "auto" else (illumination, None)
     day = bundle_sky(b, first, rho)
     other = None if second is None else bundle_sky(b, second, rho)
@@ -372,8 +372,7 @@ def estimate_bundle(
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
     joint = per_frame and noise == "relative" and camera == "linear"
     if illumination is None:  # measured irradiance where the bundle has it
-        rho = 0.2 if b.ground_reflectance is None else float(b.ground_reflectance)
-        measured = measured_sky(b, rho) is not None
+        measured = measured_sky(b, b.ground_albedo) is not None
         illumination = "measured" if measured else "auto" if joint else "gensky-clear"
     if illumination == "auto" and not joint:
         raise ValueError(
@@ -384,19 +383,50 @@ def estimate_bundle(
         idata, samples, used = _joint_fit(
             b, curves, y, usable, censored, keep, illumination, seed, sampler_options
         )
-        return _summarise(
+        run = {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"}
+    else:
+        idata, samples = _facets_fit(
             b,
             curves,
+            y,
+            usable,
+            censored,
             keep,
-            idata,
-            samples,
             illumination,
             noise,
             camera,
             seed,
-            used,
-            {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"},
+            jobs,
+            progress,
+            sampler_options,
         )
+        used = None
+        run = {
+            "seconds": samples.seconds,
+            "median_steps": float(np.median(samples.n_steps)),
+            "model": "facets"
+            if not per_frame
+            else "facets (per-frame illumination needs relative noise and a known pixel response)",
+        }
+    return _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
+
+
+def _facets_fit(
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    noise,
+    camera,
+    seed,
+    jobs,
+    progress,
+    options,
+):
+    """The facets sampled independently under the sky model's brightness: (idata, samples)."""
     if b.exposure is not None:  # frames[].exposure: pixel = exposure x radiance
         y = y / (b.exposure / np.exp(np.mean(np.log(b.exposure))))
     bases = bundle_bases(b, illumination)
@@ -404,33 +434,14 @@ def estimate_bundle(
     data = lk.curve_data(
         y[keep], usable[keep], sub, censored=censored[keep], noise=noise, camera=camera
     )
-    options = dict(seed=seed, progress=progress, **(sampler_options or {}))
+    options = dict(seed=seed, progress=progress, **(options or {}))
     if jobs > 1:
         with process_pool(jobs) as pool:
             samples = sampling.sample_posterior(data, pool=pool, **options)
     else:
         samples = sampling.sample_posterior(data, **options)
-    ids = curves.ids[keep]
-    idata = to_inference_data(samples, data, ids, times=b.times, rng=seed)
-    return _summarise(
-        b,
-        curves,
-        keep,
-        idata,
-        samples,
-        illumination,
-        noise,
-        camera,
-        seed,
-        None,
-        {
-            "seconds": samples.seconds,
-            "median_steps": float(np.median(samples.n_steps)),
-            "model": "facets"
-            if not per_frame
-            else "facets (per-frame illumination needs relative noise and a known pixel response)",
-        },
-    )
+    idata = to_inference_data(samples, data, curves.ids[keep], times=b.times, rng=seed)
+    return idata, samples
 
 
 def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run):

@@ -20,7 +20,7 @@ import pandas as pd
 
 from . import geometry, render, sky, sun
 
-__all__ = ["PAPER", "Sequence", "paper_sequence", "plastic_radiance"]
+__all__ = ["PAPER", "Sequence", "paper_sequence", "plastic_radiance", "seen_geometry"]
 
 #: The paper's scene, with bayesgloss's documented choices where it is silent.
 PAPER = {
@@ -99,3 +99,11 @@ def plastic_radiance(
     return render.radiance_material_prediction(
         seq.geometry, seq.sky, kind, colour, specularity, 0.0, **kwargs
     )
+
+
+def seen_geometry(seq: Sequence, min_cos_view: float = 0.1) -> render.ViewGeometry:
+    """The view geometry of the facets the camera sees at more than a grazing
+    angle (cos of the view angle above ``min_cos_view``) [-]."""
+    g = seq.geometry
+    seen = g.cos_view > min_cos_view
+    return render.ViewGeometry(g.normal[seen], g.view_direction[seen], g.center[seen], g.occluder)

@@ -68,13 +68,7 @@ def prior_facets(n: int, seed: int) -> tuple[lk.CurveData, np.ndarray]:
     blocks = []
     for view in ("W", "SW", "S", "SE", "E"):
         seq = scene.paper_sequence(view=view)
-        seen = seq.geometry.cos_view > 0.1
-        g = render.ViewGeometry(
-            seq.geometry.normal[seen],
-            seq.geometry.view_direction[seen],
-            seq.geometry.center[seen],
-            seq.geometry.occluder,
-        )
+        g = scene.seen_geometry(seq)
         b = render.facet_bases(g, seq.sky)
         valid = np.broadcast_to(seq.sky.sun_direction[:, 2] > 0.02, b.diffuse.shape)
         blocks.append((b, valid))

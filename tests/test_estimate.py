@@ -15,14 +15,8 @@ from bayesgloss.pool import process_pool
 @pytest.fixture(scope="module")
 def paper_bases():
     seq = scene.paper_sequence(view="SW")
-    seen = seq.geometry.cos_view > 0.1
-    g = render.ViewGeometry(
-        seq.geometry.normal[seen],
-        seq.geometry.view_direction[seen],
-        seq.geometry.center[seen],
-        seq.geometry.occluder,
-    )
-    valid = np.broadcast_to(seq.sky.sun_direction[:, 2] > 0.02, (int(seen.sum()), 19)).copy()
+    g = scene.seen_geometry(seq)
+    valid = np.broadcast_to(seq.sky.sun_direction[:, 2] > 0.02, (len(g.normal), 19)).copy()
     return render.facet_bases(g, seq.sky), valid
 
 

@@ -14,13 +14,7 @@ from bayesgloss.sampling import sample_joint
 def paper_split():
     """Split bases of the paper scene's facets seen from the SW, sun-up frames."""
     seq = scene.paper_sequence(view="SW")
-    seen = seq.geometry.cos_view > 0.1
-    g = render.ViewGeometry(
-        seq.geometry.normal[seen],
-        seq.geometry.view_direction[seen],
-        seq.geometry.center[seen],
-        seq.geometry.occluder,
-    )
+    g = scene.seen_geometry(seq)
     up = seq.sky.sun_direction[:, 2] > 0.02
     full = il.illumination_bases(g, seq.sky)
     total = render.facet_bases(g, seq.sky)

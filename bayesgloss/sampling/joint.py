@@ -45,6 +45,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 
 from .. import diagnostics
 from .. import illumination as il
@@ -128,10 +129,6 @@ class _JointChain:
         self.directions = None
         self.sweeps = 0
 
-    @property
-    def theta(self) -> np.ndarray:
-        return self.th
-
     def _level(self) -> np.ndarray:
         """Each walker's brightness level, (E, W): the mean over frames of
         log e + (log a + log b) / 2, which the scale ridge shifts by c."""
@@ -178,10 +175,7 @@ class _JointChain:
         self.sweeps += 1
 
     def _draw_log_sigma(self, q):
-        qf = q.transpose(1, 0, 2).reshape(self.f, -1)  # (F, E W)
-        dummy = np.zeros(qf.shape + (3,))
-        ls = lk.draw_log_sigma(dummy, self.cd, self.rng, q=qf)
-        return ls.reshape(self.f, self.e, self.w).transpose(1, 0, 2)
+        return _log_sigma_draws(q, self.cd, self.rng)
 
     def _frame_density(self, th, lam, parts, log_sigma):
         return il.frame_log_likelihood(th, lam, log_sigma, self.data, parts) + il.log_prior_frames(
@@ -221,7 +215,7 @@ class _JointChain:
         mu_s, mu_a, mu_b = (s * w * p for w, p in zip(weights, parts, strict=True))
         v = mu_s + mu_a + mu_b + data.floor[None, :, None, None]
         weight = (np.exp(-2 * log_sigma)[..., None] + 2.0) / v**2 * data.valid[None, :, None, :]
-        wb = il.special.expit(lam_ref[..., 3])[:, None] if data.shapes == 2 else 0.5
+        wb = special.expit(lam_ref[..., 3])[:, None] if data.shapes == 2 else 0.5
         # d mu / d (log e, log a, log b, logit w)
         grads = np.stack(
             [mu_s + mu_a + mu_b, mu_s, mu_a + mu_b, (1 - wb) * mu_b - wb * mu_a], axis=-1
@@ -325,7 +319,7 @@ class _JointChain:
         shift = np.array([0.0, 1, 1, 0]) if self.data.exposure_known else np.array([1.0, 0, 0, 0])
         for _ in range(tries):
             c = self.scale_step * self.rng.standard_normal((self.e, self.w))
-            th = self.theta
+            th = self.th
             th_new = th.copy()
             th_new[..., 2] -= c[:, None, :]
             lam_new = self.lam + c[:, :, None, None] * shift
@@ -339,6 +333,15 @@ class _JointChain:
             th[..., 2] = np.where(ok[:, None, :], th_new[..., 2], th[..., 2])
             self.lam = np.where(ok[:, :, None, None], lam_new, self.lam)
             self.accepted["scale"] += ok.mean() / tries
+
+
+def _log_sigma_draws(q, curve_data: lk.CurveData, rng) -> np.ndarray:
+    """Each facet's log sigma from its conditional given Q (E, F, W), (E, F, W)
+    (:func:`bayesgloss.likelihood.draw_log_sigma`, which takes facets first)."""
+    e, f, w = q.shape
+    qf = q.transpose(1, 0, 2).reshape(f, -1)  # (F, E W)
+    ls = lk.draw_log_sigma(np.zeros(qf.shape + (3,)), curve_data, rng, q=qf)
+    return ls.reshape(f, e, w).transpose(1, 0, 2)
 
 
 def _curve_data_at(data: il.JointData, lam) -> lk.CurveData:
@@ -475,7 +478,7 @@ def sample_joint(
         for _ in range(chunk):
             chain.sweep()
             if chain.sweeps % THIN == 0:
-                th_kept.append(chain.theta.astype(np.float32))
+                th_kept.append(chain.th.astype(np.float32))
                 lam_kept.append(chain.lam.astype(np.float32))
         if progress:
             progress(chain.sweeps - burn, max_sweeps)
@@ -500,9 +503,8 @@ def sample_joint(
     # log sigma from its conditional at every draw
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
     _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
-    qf = q.transpose(1, 0, 2).reshape(f, -1)
-    ls = lk.draw_log_sigma(np.zeros(qf.shape + (3,)), data.curve_data(), rng, q=qf)
-    draws = np.concatenate([draws3, ls.reshape(f, e, w * m, 1)], axis=-1)
+    ls = _log_sigma_draws(q, data.curve_data(), rng)  # (E, F, S)
+    draws = np.concatenate([draws3, ls.transpose(1, 0, 2)[..., None]], axis=-1)
     sweeps = max(chain.sweeps, 1)
     return JointSamples(
         draws,
