@@ -422,7 +422,8 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SKY",
         help="the sky's shape (default: 'measured', the Perez sky of the bundle's "
         "frames[].irradiance, where it has them; else gensky-clear, or with --per-frame "
-        "'auto', each frame's sky a mixture of gensky's clear and overcast skies; one of "
+        "'auto', each frame's sky a mixture of gensky's clear, intermediate and overcast "
+        "skies; one of "
         + ", ".join(sky.sky_models())
         + ")",
     )

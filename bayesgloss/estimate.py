@@ -49,7 +49,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy import special
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
@@ -231,15 +230,14 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     any of them sees: (idata, samples, frames used)."""
     az = arviz()
     rho = b.ground_albedo
-    first, second = AUTO_SKIES if illumination == "auto" else (illumination, None)
-    day = bundle_sky(b, first, rho)
-    other = None if second is None else bundle_sky(b, second, rho)
+    names = AUTO_SKIES if illumination == "auto" else (illumination,)
+    day, *others = (bundle_sky(b, name, rho) for name in names)
     ground = "sky" if illumination == "point-sun" else "plane"
     ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
     used = ok.any(axis=0) & b.sun_up
     geometry = b.view_geometry()
     bases = il.illumination_bases(
-        geometry, day, second=other, ground=ground, ground_reflectance=rho
+        geometry, day, others=others, ground=ground, ground_reflectance=rho
     ).take(keep, used)
     exposure = None
     if b.exposure is not None:
@@ -256,7 +254,7 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     )
     rng = np.random.default_rng(seed)
     th = samples.draws.transpose(1, 0, 2, 3)  # (E, F, S, 4)
-    frames = samples.frames  # (E, S, T, 3)
+    frames = samples.frames  # (E, S, T, L)
     ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
     pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
     post = {
@@ -269,20 +267,23 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
     }
     if exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
-    if data.shapes == 2:
-        post["overcast"] = special.expit(frames[..., 3])
-    frame_index = np.flatnonzero(used)
+    dims = {
+        **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
+        **{v: ["frame"] for v in ("sun", "sky", "exposure")},
+        "y": ["facet", "frame"],
+    }
+    coords = {"facet": curves.ids[keep], "frame": np.flatnonzero(used)}
+    if data.shapes >= 2:  # each frame's weights of the sky models
+        post["sky_weight"] = np.exp(il.log_shape_weights(frames))
+        dims["sky_weight"] = ["frame", "sky_model"]
+        coords["sky_model"] = list(names)
     idata = az.from_dict(
         posterior=post,
         log_likelihood={"y": ll},
         posterior_predictive={"y": pred},
         observed_data={"y": np.where(data.valid, data.y, np.nan)},
-        coords={"facet": curves.ids[keep], "frame": frame_index},
-        dims={
-            **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
-            **{v: ["frame"] for v in ("sun", "sky", "exposure", "overcast")},
-            "y": ["facet", "frame"],
-        },
+        coords=coords,
+        dims=dims,
     )
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)
     idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
@@ -298,16 +299,38 @@ def _frame_summary(idata, b, used) -> list:
     out = []
     for j, t in enumerate(np.flatnonzero(used)):
         entry = {"frame": int(t), "time": b.times[t].isoformat()}
-        for v in ("sun", "sky", "exposure", "overcast"):
+        for v in ("sun", "sky", "exposure"):
             if v in idata.posterior:
                 entry[v] = _quantiles(idata.posterior[v].values[..., j])
+        if "sky_weight" in idata.posterior:
+            weights = idata.posterior["sky_weight"]
+            entry["sky_weight"] = {
+                str(name): _quantiles(weights.values[..., j, k])
+                for k, name in enumerate(weights["sky_model"].values)
+            }
         out.append(entry)
     return out
 
 
+def _sky_model_summary(idata) -> dict | None:
+    """The posterior weight of each sky model, averaged over frames, and the
+    one with the most (None with one sky model)."""
+    if "sky_weight" not in idata.posterior:
+        return None
+    weights = idata.posterior["sky_weight"]
+    mean = weights.values.mean(axis=(0, 1, 2))
+    names = [str(x) for x in weights["sky_model"].values]
+    return {
+        "weights": {n: float(m) for n, m in zip(names, mean, strict=True)},
+        "most_weight": names[int(np.argmax(mean))],
+    }
+
+
 #: ``illumination="auto"`` with per-frame illumination: each frame's sky a
-#: mixture of these two shapes, its weight inferred (:mod:`bayesgloss.illumination`).
-AUTO_SKIES = ("gensky-clear", "gensky-overcast")
+#: mixture of these shapes, its weights inferred (:mod:`bayesgloss.illumination`):
+#: a clear sky, the broad circumsolar brightening of an intermediate or hazy
+#: one (without it a glossy lobe stands in for it), and an overcast one.
+AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
 
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
@@ -510,6 +533,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     }
     if used is not None:
         summary["frames"] = _frame_summary(idata, b, used)
+        summary["sky_models"] = _sky_model_summary(idata)
     return EstimateResult(idata, summary, samples)
 
 

@@ -12,20 +12,26 @@ The forward model is linear in the incident radiance, so the bases of
 the ground it lights) and a sky part (the sky dome and the ground it
 lights), :func:`illumination_bases`. For facet f in frame t
 
-    mu_ft = s_f e_t [a_t S_ft + b_t ((1 - w_t) K^A_ft + w_t K^B_ft)],
-    S = (1 - gamma_f) D^sun + gamma_f G^sun(n_f),  K = (1 - gamma_f) D^sky + gamma_f G^sky(n_f),
+    mu_ft = s_f e_t [a_t S_ft + b_t sum_k w_tk K^k_ft],
+    S = (1 - gamma_f) D^sun + gamma_f G^sun(n_f),  K^k = (1 - gamma_f) D^k + gamma_f G^k(n_f),
 
 with a_t and b_t the sun's and the sky's brightness relative to the sky
 model's prediction, e_t the frame's exposure relative to the others (1
 where the bundle's encoding is ``linear-radiance`` or ``frames[].exposure``
 gives it), s_f the facet's scale (albedo, units). The sky's shape is a
-per-frame mixture of two sky models, A and B (by default gensky's clear and
-overcast skies, B scaled to A's diffuse horizontal irradiance in each
-frame, so that b_t keeps its meaning), with weight w_t: the model is
-linear in its bases for any shape in between, and each frame finds its own
-shape (a clear, hazy, intermediate or overcast sky) instead of being told
-one. With one sky model, K^B = K^A and w_t is fixed. The latent coordinates
-of a frame are ``(log e_t, log a_t, log b_t, logit w_t)``.
+per-frame mixture of K sky models (by default gensky's clear, intermediate
+and overcast skies; each scaled to the first one's diffuse horizontal
+irradiance in each frame, so that b_t keeps its meaning), with weights w_t
+on the simplex: the model is linear in its bases for any shape in between,
+and each frame finds its own shape (a clear, hazy, intermediate or overcast
+sky, the circumsolar brightening of a hazy or intermediate sky included)
+instead of being told one. The mixture nests every one of its sky models,
+so the posterior of the weights says which shape the object saw, and
+gloss is averaged over the shapes the data allow (a continuous relaxation
+of averaging over discrete sky families by evidence, at the cost of one
+fit). The latent coordinates of a frame are ``(log e_t, log a_t, log b_t,
+u_t1, ..., u_t(K-1))``, u_tk = log(w_tk / w_t0); with one sky model the
+fourth coordinate is a fixed, unused slot (so there are always at least 4).
 
 Noise: relative, sd = sigma_f (mu_ft + c_f), with the floor c_f =
 ``FLOOR_FRACTION`` x the facet's largest observation (fixed by the data, so
@@ -40,8 +46,9 @@ Priors (:class:`IlluminationPriors`): log a_t a two-part mixture, a clear
 sun near the model's (weight 0.8, N(0, 0.35^2): haze and the model's
 turbidity), and a sun dimmed or hidden by cloud (weight 0.2, N(-2.5,
 1.5^2): down to a few per cent); log b_t ~ N(0, 0.7^2) (a sky half or
-twice as bright at 1 sd: haze, broken cloud); w_t uniform on [0, 1]
-(logit w_t logistic); log e_t ~ N(0, 2^2) where the exposure is unknown.
+twice as bright at 1 sd: haze, broken cloud); w_t uniform on the simplex
+(Dirichlet(1, ..., 1): in the u coordinates, log density sum_k log w_tk);
+log e_t ~ N(0, 2^2) where the exposure is unknown.
 The facets' priors are those of :class:`bayesgloss.likelihood.Priors`.
 """
 
@@ -76,10 +83,13 @@ __all__ = [
     "sample_prior",
     "simulate",
     "LATENTS",
+    "latent_names",
+    "log_shape_weights",
 ]
 
-#: The latent coordinates of each frame, in order.
-LATENTS = ("log_exposure", "log_sun", "log_sky", "logit_sky_b")
+#: The latent coordinates of each frame, in order (then one log weight ratio
+#: per further sky model: :func:`latent_names`).
+LATENTS = ("log_exposure", "log_sun", "log_sky", "log_shape_ratio_1")
 FLOOR_FRACTION = 0.01
 
 
@@ -119,79 +129,104 @@ def split_sky(day):
 
 @dataclass(frozen=True)
 class IlluminationBases:
-    """Bases split by source: index 0 the sun, 1 sky model A, 2 sky model B.
+    """Bases split by source: index 0 the sun, then one per sky model.
 
     Attributes
     ----------
-    diffuse : ndarray (3, F, T)
-        D^sun, D^sky of A and of B [W sr^-1 m^-2].
-    glossy : ndarray (3, F, N, T)
-        G^sun, G^sky of A and of B on the exponent table [W sr^-1 m^-2].
+    diffuse : ndarray (P, F, T)
+        D^sun, then D^k of each sky model [W sr^-1 m^-2]; P = 1 + max(K, 2)
+        sources (with one sky model, a copy of it as a second).
+    glossy : ndarray (P, F, N, T)
+        G^sun, then G^k of each sky model on the exponent table [W sr^-1 m^-2].
     exponents : ndarray (N,)
     shapes : int
-        Sky models: 2, or 1 (B a copy of A).
+        Sky models, K.
+    log_sun_ratio : ndarray (K, T) or None
+        log of each sky model's own solar radiance over the first's (where
+        a model draws no sun, the cloud component's mean of the sun prior):
+        where each model would put log a_t, for the starts of the sampler.
     """
 
     diffuse: np.ndarray
     glossy: np.ndarray
     exponents: np.ndarray
     shapes: int = 1
+    log_sun_ratio: np.ndarray | None = None
 
     def total(self) -> render.FacetBases:
-        """The bases at the model's brightness (a = b = e = 1, w = 1/2)."""
-        mix = np.array([1.0, 0.5, 0.5])
+        """The bases at the model's brightness (a = b = e = 1, even weights)."""
+        mix = _even_mix(len(self.diffuse))
         return render.FacetBases(
             np.tensordot(mix, self.diffuse, 1), np.tensordot(mix, self.glossy, 1), self.exponents
         )
 
     def take(self, facets=slice(None), frames=slice(None)) -> IlluminationBases:
         """The bases of a subset of facets and frames."""
+        ratio = self.log_sun_ratio
         return IlluminationBases(
             self.diffuse[:, facets][..., frames],
             self.glossy[:, facets][..., frames],
             self.exponents,
             self.shapes,
+            None if ratio is None else ratio[:, frames],
         )
 
 
+def _even_mix(sources: int) -> np.ndarray:
+    """Weights of the sources at the model's brightness: the sun 1, the sky
+    models evenly."""
+    return np.array([1.0] + [1.0 / (sources - 1)] * (sources - 1))
+
+
 def illumination_bases(
-    geometry, day, exponents=render.DEFAULT_EXPONENTS, second=None, **kwargs
+    geometry, day, exponents=render.DEFAULT_EXPONENTS, others=(), **kwargs
 ) -> IlluminationBases:
-    """Forward-model bases of the sun of ``day``, its sky, and a second sky's.
+    """Forward-model bases of the sun of ``day``, its sky, and other skies'.
 
     Parameters
     ----------
     geometry : bayesgloss.render.ViewGeometry
     day : bayesgloss.sky.DaylightSky
-        Sky model A, and the sun.
+        The first sky model, and the sun.
     exponents : array_like
         Glossy exponent table.
-    second : bayesgloss.sky.DaylightSky, optional
-        Sky model B (its sun ignored), scaled in each frame to A's diffuse
-        horizontal irradiance; None: one sky model.
+    others : DaylightSky or sequence of them
+        Further sky models (their suns ignored), each scaled in each frame
+        to the first one's diffuse horizontal irradiance; none: one sky model.
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...).
     """
     from .sky import horizontal_irradiance
 
+    if not isinstance(others, (list, tuple)):
+        others = (others,)
     sun_only, sky_a = split_sky(day)
     parts = [render.facet_bases(geometry, d, exponents, **kwargs) for d in (sun_only, sky_a)]
     d_parts, g_parts = [p.diffuse for p in parts], [p.glossy for p in parts]
-    if second is None:
+    if not others:
         d_parts.append(d_parts[1])
         g_parts.append(g_parts[1])
-    else:
+    e_a = horizontal_irradiance(sky_a, include_sun=False)
+    sun_a = np.broadcast_to(day.solar_radiance, e_a.shape)
+    ratios = [np.zeros(e_a.shape)]
+    for second in others:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = np.log(np.broadcast_to(second.solar_radiance, e_a.shape) / sun_a)
+        ratios.append(np.where(np.isfinite(r), r, IlluminationPriors().sun_cloud_mean))
         sky_b = split_sky(second)[1]
         other = render.facet_bases(geometry, sky_b, exponents, **kwargs)
-        e_a = horizontal_irradiance(sky_a, include_sun=False)
         e_b = horizontal_irradiance(sky_b, include_sun=False)
         with np.errstate(invalid="ignore", divide="ignore"):
             factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)
         d_parts.append(other.diffuse * factor)
         g_parts.append(other.glossy * factor)
     return IlluminationBases(
-        np.stack(d_parts), np.stack(g_parts), parts[0].exponents, 1 if second is None else 2
+        np.stack(d_parts),
+        np.stack(g_parts),
+        parts[0].exponents,
+        1 + len(others),
+        np.stack(ratios),
     )
 
 
@@ -206,8 +241,8 @@ class JointData:
     valid : ndarray (F, T) of bool
     floor : ndarray (F,)
         c_f on the observed scale.
-    diffuse : ndarray (3, F, T)
-    glossy : ndarray (3, F, N, T)
+    diffuse : ndarray (P, F, T)
+    glossy : ndarray (P, F, N, T)
     log_n_grid : ndarray (N,)
     log_s_center : ndarray (F,)
         Prior centre of log s (the data's scale relative to the total bases).
@@ -216,7 +251,9 @@ class JointData:
     priors : bayesgloss.likelihood.Priors
     frame_priors : IlluminationPriors
     shapes : int
-        Sky models (1: w_t fixed).
+        Sky models, K (1: no weights).
+    log_sun_ratio : ndarray (K, T) or None
+        :attr:`IlluminationBases.log_sun_ratio` (starts only).
     """
 
     y: np.ndarray
@@ -230,11 +267,23 @@ class JointData:
     priors: lk.Priors = field(default_factory=lk.Priors)
     frame_priors: IlluminationPriors = field(default_factory=IlluminationPriors)
     shapes: int = 1
+    log_sun_ratio: np.ndarray | None = None
+
+    @property
+    def sources(self) -> int:
+        """P: the sun and the sky models (at least 2 of them, module docstring)."""
+        return len(self.diffuse)
+
+    @property
+    def n_latents(self) -> int:
+        """Latent coordinates of each frame: 3 + the P - 2 weight ratios."""
+        return self.sources + 1
 
     @property
     def free(self) -> np.ndarray:
-        """Which of the frame latents (:data:`LATENTS`) are unknowns, (4,) of bool."""
-        return np.array([not self.exposure_known, True, True, self.shapes == 2])
+        """Which of the frame latents (:func:`latent_names`) are unknowns, (L,) of bool."""
+        ratios = [self.shapes >= 2] * (self.sources - 2)
+        return np.array([not self.exposure_known, True, True, *ratios])
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -247,7 +296,7 @@ class JointData:
 
     def curve_data(self) -> lk.CurveData:
         """The facets alone at the model's brightness (for starts and constants)."""
-        mix = np.array([1.0, 0.5, 0.5])
+        mix = _even_mix(self.sources)
         return lk.CurveData(
             self.y,
             self.valid,
@@ -262,11 +311,13 @@ class JointData:
     @functools.cached_property
     def tables(self) -> np.ndarray:
         """Rows (G - D, its step to the next node) of each source, of every
-        (facet, node), (F N, 6, T), for one gather per walker."""
+        (facet, node), (F N, 2 P, T), for one gather per walker."""
         g, d = self.glossy, self.diffuse[:, :, None, :]
         nxt = np.concatenate([g[:, :, 1:], g[:, :, -1:]], axis=2)
-        rows = np.stack([x for p in range(3) for x in (g[p] - d[p], nxt[p] - g[p])], axis=2)
-        return np.ascontiguousarray(rows.reshape(-1, 6, g.shape[-1]))
+        rows = np.stack(
+            [x for p in range(self.sources) for x in (g[p] - d[p], nxt[p] - g[p])], axis=2
+        )
+        return np.ascontiguousarray(rows.reshape(-1, 2 * self.sources, g.shape[-1]))
 
     @functools.cached_property
     def sigma_constants(self):
@@ -329,6 +380,7 @@ def joint_data(
         cd.priors,
         frame_priors or IlluminationPriors(),
         bases.shapes,
+        bases.log_sun_ratio,
     )
 
 
@@ -347,7 +399,7 @@ def log_prior_facets(theta, data: JointData) -> np.ndarray:
 
 
 def log_prior_frames(lam, data: JointData) -> np.ndarray:
-    """Log prior of each frame's latents, (...) for lam (..., 4) (module docstring)."""
+    """Log prior of each frame's latents, (...) for lam (..., L) (module docstring)."""
     q = data.frame_priors
     log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
     clear = np.log1p(-q.sun_cloud_weight) - 0.5 * (log_a / q.sun_clear_sd) ** 2
@@ -355,11 +407,24 @@ def log_prior_frames(lam, data: JointData) -> np.ndarray:
     cloud = np.log(q.sun_cloud_weight) - 0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2
     cloud -= np.log(q.sun_cloud_sd)
     lp = np.logaddexp(clear, cloud) - 0.5 * (log_b / q.sky_sd) ** 2
-    if data.shapes == 2:  # w uniform: logit w logistic
-        lp = lp - 2.0 * np.logaddexp(0.0, -lam[..., 3]) - lam[..., 3]
+    if data.shapes >= 2:  # w uniform on the simplex: sum_k log w_k in the u coordinates
+        lp = lp + np.sum(log_shape_weights(lam), axis=-1)
     if data.exposure_known:
         return lp
     return lp - 0.5 * (log_e / q.exposure_sd) ** 2
+
+
+def log_shape_weights(lam) -> np.ndarray:
+    """log w_tk of the sky models, (..., K) for lam (..., 3 + K - 1): the
+    softmax of (0, u_1, ..., u_(K-1))."""
+    u = np.concatenate([np.zeros_like(lam[..., :1]), lam[..., 3:]], axis=-1)
+    return u - special.logsumexp(u, axis=-1, keepdims=True)
+
+
+def latent_names(data: JointData) -> tuple[str, ...]:
+    """Names of each frame's latent coordinates (:data:`LATENTS`, then one log
+    weight ratio per further sky model)."""
+    return LATENTS[:3] + tuple(f"log_shape_ratio_{k}" for k in range(1, data.sources - 1))
 
 
 # --------------------------------------------------------------------------
@@ -367,42 +432,42 @@ def log_prior_frames(lam, data: JointData) -> np.ndarray:
 
 
 def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, ...]:
-    """S, K^A and K^B of the module docstring at unit scale, (E, F, W, T)
-    each, for theta (E, F, W, >= 2); G linear in log n between the table's
-    nodes (K^B is K^A with one sky model)."""
+    """S and each sky model's K^k of the module docstring at unit scale, P
+    arrays (E, F, W, T), for theta (E, F, W, >= 2); G linear in log n between
+    the table's nodes (with one sky model, its copy second)."""
     rows = data.tables if tables is None else tables
     n = len(data.log_n_grid)
     j, w = lk.grid_position(theta[..., 1], data.log_n_grid)  # (E, F, W)
     index = j + (np.arange(data.shape[0]) * n)[None, :, None]
-    r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 6, -1)  # (E, F, W, 6, T)
+    r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 2 * data.sources, -1)
     w, gamma = w[..., None], theta[..., 0:1]
     parts = [
         data.diffuse[p][None, :, None, :] + gamma * (r[..., 2 * p, :] + w * r[..., 2 * p + 1, :])
-        for p in range(3 if data.shapes == 2 else 2)
+        for p in range(data.sources if data.shapes >= 2 else 2)
     ]
     return (*parts, parts[1]) if data.shapes == 1 else tuple(parts)
 
 
 def frame_weights(lam, data: JointData):
-    """The weights of S, K^A and K^B, e a, e b (1 - w) and e b w, (E, 1, W, T)
-    each, for lam (E, W, T, 4)."""
+    """The weights of S and of each K^k: e a, then e b w_k, P arrays (E, 1, W,
+    T), for lam (E, W, T, L) (one sky model: e b, then 0)."""
     log_e = lam[..., 0] if data.log_exposure is None else data.log_exposure
     ea = np.exp(log_e + lam[..., 1])[:, None]
-    eb = np.exp(log_e + lam[..., 2])[:, None]
+    log_eb = log_e + lam[..., 2]
     if data.shapes == 1:
+        eb = np.exp(log_eb)[:, None]
         return ea, eb, 0.0 * eb
-    w = special.expit(lam[..., 3])[:, None]
-    return ea, eb * (1.0 - w), eb * w
+    log_w = log_shape_weights(lam)
+    return (ea, *(np.exp(log_eb + log_w[..., k])[:, None] for k in range(data.shapes)))
 
 
 def predict(theta, lam, data: JointData, parts=None) -> np.ndarray:
-    """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, 4)."""
+    """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, L)."""
     parts = unit_parts(theta, data) if parts is None else parts
     weights = frame_weights(lam, data)
     mu = weights[0] * parts[0]
-    mu += weights[1] * parts[1]
-    if data.shapes == 2:
-        mu += weights[2] * parts[2]
+    for wk, pk in zip(weights[1:], parts[1:], strict=True):
+        mu += wk * pk
     return np.exp(theta[..., 2:3]) * mu
 
 
@@ -459,7 +524,7 @@ def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
 
 
 def sample_prior(data: JointData, size: int, rng: np.random.Generator):
-    """Draws from the joint prior: theta (F, size, 4) and lam (size, T, 4)."""
+    """Draws from the joint prior: theta (F, size, 4) and lam (size, T, L)."""
     p, q = data.priors, data.frame_priors
     f, t = data.shape
     th = np.empty((f, size, 4))
@@ -467,7 +532,7 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
     th[..., 1] = rng.uniform(*p.log_n, (f, size))
     th[..., 2] = data.log_s_center[:, None] + p.log_s_sd * rng.standard_normal((f, size))
     th[..., 3] = rng.uniform(*p.log_sigma, (f, size))
-    lam = np.zeros((size, t, 4))
+    lam = np.zeros((size, t, data.n_latents))
     lam[..., 0] = 0.0 if data.exposure_known else q.exposure_sd * rng.standard_normal((size, t))
     cloud = rng.random((size, t)) < q.sun_cloud_weight
     lam[..., 1] = np.where(
@@ -476,14 +541,15 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
         q.sun_clear_sd * rng.standard_normal((size, t)),
     )
     lam[..., 2] = q.sky_sd * rng.standard_normal((size, t))
-    if data.shapes == 2:
-        lam[..., 3] = rng.logistic(size=(size, t))
+    if data.shapes >= 2:  # uniform on the simplex, as log ratios to the first
+        log_w = np.log(rng.dirichlet(np.ones(data.shapes), size=(size, t)))
+        lam[..., 3:] = log_w[..., 1:] - log_w[..., :1]
     return th, lam
 
 
 def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarray:
     """Observations from the model, (E, F, W, T), theta (E, F, W, 4) with log
-    sigma, lam (E, W, T, 4)."""
+    sigma, lam (E, W, T, L)."""
     mu = predict(theta, lam, data)
     sd = np.exp(theta[..., 3:4]) * (mu + data.floor[None, :, None, None])
     return mu + sd * rng.standard_normal(mu.shape)

@@ -256,19 +256,26 @@ def _illumination_panel(ax, idata) -> None:
     """(h) each frame's inferred sun and sky brightness (relative to the sky
     model's), and exposure where it was unknown: medians and 90 % intervals."""
     frames = idata.posterior["frame"].values
-    styles = {"sun": "tab:orange", "sky": "tab:blue", "exposure": "0.4", "overcast": "tab:purple"}
+    styles = {"sun": "tab:orange", "sky": "tab:blue", "exposure": "0.4"}
     for name, colour in styles.items():
         if name not in idata.posterior:
             continue
         x = idata.posterior[name].values.reshape(-1, len(frames))
         lo, mid, hi = np.quantile(x, [0.05, 0.5, 0.95], axis=0)
-        label = "overcast weight" if name == "overcast" else f"{name} (x model)"
         ax.fill_between(frames, lo, hi, color=colour, alpha=0.2)
-        ax.plot(frames, mid, "o-", color=colour, ms=3, label=label)
+        ax.plot(frames, mid, "o-", color=colour, ms=3, label=f"{name} (x model)")
     ax.set_yscale("log")
     ax.set(xlabel="frame", ylabel="relative to the sky model [-]")
     ax.set_title("(h) each frame's illumination, inferred with the facets (90 %)", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower left")
+    if "sky_weight" in idata.posterior:  # the sky models' weights, posterior means
+        weights = idata.posterior["sky_weight"]
+        twin = ax.twinx()
+        mean = weights.values.mean(axis=(0, 1))  # (T, K)
+        for k, name in enumerate(weights["sky_model"].values):
+            twin.plot(frames, mean[:, k], "--", lw=1, label=f"weight: {name}")
+        twin.set(ylim=(0, 1), ylabel="sky model weight (mean) [-]")
+        twin.legend(fontsize=7, loc="lower right")
 
 
 def format_comparison(res: dict, name, level: str = "object") -> str:

@@ -110,6 +110,68 @@ def test_known_exposure_is_fixed_and_unknown_is_inferred(paper_split):
         il.joint_data(y, np.ones((6, t), bool), bases, exposure=-np.ones(t))
 
 
+@pytest.fixture(scope="module")
+def paper_three_skies():
+    """Split bases of the paper scene (SW) under gensky's clear, intermediate and
+    overcast skies (the ``auto`` mixture), sun-up frames."""
+    from bayesgloss import sky
+
+    seq = scene.paper_sequence(view="SW")
+    g = scene.seen_geometry(seq)
+    up = seq.sky.sun_direction[:, 2] > 0.02
+    others = [
+        sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
+        for name in ("gensky-intermediate", "gensky-overcast")
+    ]
+    return il.illumination_bases(g, seq.sky, others=others), up
+
+
+def test_sky_model_weights_are_uniform_on_the_simplex_a_priori(paper_three_skies):
+    # with no usable observation the joint sampler must draw the prior: each
+    # frame's three sky-model weights Dirichlet(1, 1, 1), so each weight has
+    # mean 1/3 and P(w < 0.1) = 1 - 0.9^2 = 0.19 (a sampler or prior with the
+    # Jacobian of the log-ratio coordinates wrong gives other values: without
+    # it, the weights pile at the simplex's corners)
+    full, up = paper_three_skies
+    bases = full.take(slice(0, 4), np.flatnonzero(up)[3:9])
+    f, t = bases.diffuse.shape[1:]
+    data = il.joint_data(np.ones((f, t)), np.zeros((f, t), bool), bases, exposure=np.ones(t))
+    assert data.shapes == 3 and data.n_latents == 5 and data.free.tolist() == [False] + [True] * 4
+    res = sample_joint(data, seed=3, min_sweeps=1200, max_sweeps=1200)
+    w = np.exp(il.log_shape_weights(res.frames)).reshape(-1, 3)
+    # 4 x 16 walkers x 6 frames, thinned 4: ~15000 draws, autocorrelated;
+    # the sd of a mean of uniform-simplex weights is 0.24 / sqrt(ESS ~ 500)
+    np.testing.assert_allclose(w.mean(axis=0), 1 / 3, atol=0.04)
+    np.testing.assert_allclose(np.mean(w < 0.1, axis=0), 0.19, atol=0.05)
+
+
+def test_joint_model_tells_an_intermediate_sky(paper_three_skies):
+    # an object simulated under the intermediate sky alone (its circumsolar
+    # brightening is what a glossy lobe would otherwise be fitted to): the
+    # mixture must give that shape most of the weight, and the gloss right
+    full, up = paper_three_skies
+    bases = full.take(slice(None), up)
+    f, t = bases.diffuse.shape[1:]
+    lam = np.zeros((1, 1, t, 5))
+    lam[..., 3], lam[..., 4] = 8.0, 0.0  # w = (~0, ~1, ~0): intermediate
+    th = np.zeros((1, f, 1, 4))
+    th[..., 0], th[..., 1], th[..., 2], th[..., 3] = 0.3, np.log(100.0), np.log(0.5), np.log(0.02)
+    valid = np.ones((f, t), bool)
+    ref = il.joint_data(np.ones((f, t)), valid, bases, exposure=np.ones(t))
+    y = il.simulate(th, lam, ref, np.random.default_rng(11))[0, :, 0]
+    data = il.joint_data(y, valid, bases, exposure=np.ones(t))
+    res = sample_joint(data, seed=4, min_sweeps=1000, max_sweeps=1000)
+    w = np.exp(il.log_shape_weights(res.frames)).mean(axis=(0, 1))  # (T, 3)
+    # averaged over the day, the intermediate sky has most of the weight (the
+    # uniform prior gives 1/3); a low sun's frame may barely tell the shapes
+    # apart (measured: 1 of 15 frames a near tie, 0.46 against 0.40)
+    assert w.mean(axis=0)[1] > 0.7, w
+    assert np.sum(np.argmax(w, axis=1) != 1) <= 2, w
+    gamma = np.median(res.draws[..., 0].reshape(f, -1), axis=1)
+    # the clear-overcast mixture of the previous stop read such objects ~0.3-0.7 high
+    assert abs(np.median(gamma) - 0.3) < 0.03
+
+
 def _sbc_ranks(paper_split, n_rep, seed, n_draws=99):
     """Simulation-based calibration of the joint model (Talts et al. 2018): objects
     of 8 facets over 8 frames, facets and frames drawn from the joint prior
