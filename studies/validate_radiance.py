@@ -18,11 +18,14 @@ interval's coverage reported. The truth is the bundle's ``truth.gloss``
 (spec / (spec + (1 - spec) rho) for plastic, spec for metal: Fresnel
 aside, which the issue "Gloss that means the material's gloss" owns).
 
-Each bundle's scores are cached in ``studies/out/validation_set/scores``
-(resumable); the table and the figure go to ``studies/results/``
-(``validation_radiance.json``, ``validation_radiance.png``).
+Each bundle's scores are cached in ``studies/out/<set>/scores``
+(resumable); the table and the figures go to ``studies/results/``
+(``validation_radiance.json``, ``.png`` and ``_broken_cloud_sun.png``; for
+``--set validation_holdout``, ``validation_holdout.*``).
 
 Usage: python studies/validate_radiance.py [--jobs 2] [--max-sweeps 2000]
+[--redo per-frame ...] (score those methods afresh, keeping the others' cached scores)
+[--set validation_set|validation_holdout]
 """
 
 from __future__ import annotations
@@ -37,8 +40,9 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
-BUNDLES = HERE / "out" / "validation_set" / "bundles"
-SCORES = HERE / "out" / "validation_set" / "scores"
+#: The sets: the 48-sequence validation set, and the 24-sequence holdout drawn
+#: after its first run (``configs/validation_holdout.json``).
+SETS = {"validation_set": "validation_radiance", "validation_holdout": "validation_holdout"}
 RESULTS = HERE / "results"
 METHODS = ("baseline", "fixed", "per-frame")
 
@@ -53,15 +57,17 @@ def direct_sun(truth: dict) -> bool:
     return True
 
 
-def score_bundle(path: str, max_sweeps: int) -> dict:
-    """The three estimates of one bundle (the truth read only to score)."""
+def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None = None) -> dict:
+    """The estimates ``methods`` of one bundle (the truth read only to score),
+    added to ``out`` (a cached score) or to a new one."""
     from bayesgloss import baseline, estimate
     from bayesgloss import bundle as bundle_io
 
     warnings.simplefilter("ignore")
     b = bundle_io.read_bundle(path)
     truth = b.truth or {}
-    out = {
+    out = dict(out or {})
+    out |= {
         "bundle": Path(path).name,
         "category": truth.get("config", {}).get("category", truth.get("sky")),
         "sky": truth.get("sky"),
@@ -70,10 +76,13 @@ def score_bundle(path: str, max_sweeps: int) -> dict:
         "encoding": b.pixel_encoding,
         "facets": len(b.facets.ids),
     }
-    t0 = time.perf_counter()
-    base = baseline.bundle_peak_frame_gloss(b)
-    out["baseline"] = {"median": float(base.object_gloss), "seconds": time.perf_counter() - t0}
+    if "baseline" in methods:
+        t0 = time.perf_counter()
+        base = baseline.bundle_peak_frame_gloss(b)
+        out["baseline"] = {"median": float(base.object_gloss), "seconds": time.perf_counter() - t0}
     for name, per_frame in (("fixed", False), ("per-frame", True)):
+        if name not in methods:
+            continue
         t0 = time.perf_counter()
         res = estimate.estimate_bundle(
             b, per_frame=per_frame, sampler_options={"max_steps": max_sweeps}
@@ -83,21 +92,31 @@ def score_bundle(path: str, max_sweeps: int) -> dict:
             **{k: obj["gamma"][k] for k in ("median", "q05", "q95")},
             "flags": obj.get("flags", []),
             "model": res.summary["sampler"]["model"],
+            "illumination": res.summary["illumination"],
             "seconds": time.perf_counter() - t0,
         }
         if per_frame and "frames" in res.summary:
-            out[name]["sun"] = [f["sun"]["median"] for f in res.summary["frames"]]
-            out[name]["sky"] = [f["sky"]["median"] for f in res.summary["frames"]]
+            frames = res.summary["frames"]
+            out[name]["frame"] = [f["frame"] for f in frames]
+            for v in ("sun", "sky"):
+                out[name][v] = [f[v]["median"] for f in frames]
+                out[name][f"{v}_q05"] = [f[v]["q05"] for f in frames]
+                out[name][f"{v}_q95"] = [f[v]["q95"] for f in frames]
+            out[name]["sky_models"] = res.summary.get("sky_models")
     return out
 
 
-def _cached(path: Path, max_sweeps: int) -> dict:
-    SCORES.mkdir(parents=True, exist_ok=True)
-    file = SCORES / f"{path.name}.json"
-    if file.exists():
-        return json.loads(file.read_text())
-    out = score_bundle(str(path), max_sweeps)
-    file.write_text(json.dumps(out, indent=1))
+def _cached(path: Path, max_sweeps: int, redo=(), scores: Path | None = None) -> dict:
+    """The scores of one bundle, from the cache in ``scores`` where it has
+    them; the methods in ``redo`` (and any the cache lacks) computed afresh."""
+    scores = scores or path.parent.parent / "scores"
+    scores.mkdir(parents=True, exist_ok=True)
+    file = scores / f"{path.name}.json"
+    out = json.loads(file.read_text()) if file.exists() else {}
+    todo = [m for m in METHODS if m in redo or m not in out]
+    if todo:
+        out = score_bundle(str(path), max_sweeps, todo, out)
+        file.write_text(json.dumps(out, indent=1))
     return out
 
 
@@ -172,19 +191,109 @@ def figure(scores: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+#: gensky's three CIE skies and the name of the ``auto`` mixture's sky model for each.
+GENSKY_FAMILIES = {
+    "gensky-clear": "gensky-clear",
+    "gensky-intermediate": "gensky-intermediate",
+    "gensky-overcast": "gensky-overcast",
+}
+
+
+def family_table(scores: list[dict]) -> dict:
+    """Which sky model of the per-frame ``auto`` mixture has the most mean
+    weight, per rendering sky: named right for gensky's skies (the issue's
+    goal: at least 90 %), and what wins for the others."""
+    out = {}
+    for s in scores:
+        pf = s.get("per-frame", {})
+        models = pf.get("sky_models")
+        if not models:
+            continue
+        row = out.setdefault(s["category"], {"sequences": 0, "most_weight": {}, "right": 0})
+        row["sequences"] += 1
+        win = models["most_weight"]
+        row["most_weight"][win] = row["most_weight"].get(win, 0) + 1
+        row["right"] += GENSKY_FAMILIES.get(s["sky"]) == win
+    gensky = [r for c, r in out.items() if c in GENSKY_FAMILIES]
+    out["gensky_named_right"] = {
+        "right": sum(r["right"] for r in gensky),
+        "sequences": sum(r["sequences"] for r in gensky),
+    }
+    return out
+
+
+def sun_figure(scores: list[dict], bundles: Path, path: Path) -> dict:
+    """Broken-cloud days: each frame's inferred sun brightness against the DNI
+    that rendered it, both relative to their medians over the frames whose
+    beam was not cut (the level is the exposure's and the scale's; the
+    shape over the day is what the object tells). Returns the points."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.2, 4.8))
+    points = {}
+    for s in scores:
+        pf = s.get("per-frame", {})
+        if s["category"] != "broken-cloud" or "frame" not in pf:
+            continue
+        truth = json.loads((bundles / s["bundle"] / "sequence.json").read_text())["truth"]
+        dni = np.asarray(truth["dni"], float)[pf["frame"]]
+        sun, lo, hi = (np.asarray(pf[k], float) for k in ("sun", "sun_q05", "sun_q95"))
+        clear = dni > 0.5 * dni.max()
+        ref_dni, ref_sun = np.median(dni[clear]), np.median(sun[clear])
+        x, y = dni / ref_dni, sun / ref_sun
+        ax.errorbar(
+            x,
+            y,
+            yerr=[y - lo / ref_sun, hi / ref_sun - y],
+            fmt="o",
+            ms=4,
+            lw=0.8,
+            label=s["bundle"][:20],
+        )
+        points[s["bundle"]] = {"dni_relative": x.tolist(), "sun_relative": y.tolist()}
+    ax.plot([0, 1.3], [0, 1.3], "k--", lw=0.8)
+    ax.set(
+        xlabel="rendered DNI / its median over unclouded frames",
+        ylabel="inferred sun / its median over those frames",
+        title="broken-cloud days: each frame's sun (90 %)",
+    )
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return points
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--max-sweeps", type=int, default=2000)
-    ap.add_argument("--bundles", default=str(BUNDLES))
+    ap.add_argument("--set", default="validation_set", choices=tuple(SETS))
+    ap.add_argument(
+        "--redo", nargs="*", default=[], choices=METHODS, help="methods to score afresh"
+    )
     args = ap.parse_args(argv)
-    paths = sorted(p for p in Path(args.bundles).iterdir() if (p / "sequence.json").exists())
+    bundles = HERE / "out" / args.set / "bundles"
+    name = SETS[args.set]
+    paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
     with ProcessPoolExecutor(args.jobs) as pool:
-        scores = list(pool.map(_cached, paths, [args.max_sweeps] * len(paths)))
+        n = len(paths)
+        scores = list(pool.map(_cached, paths, [args.max_sweeps] * n, [args.redo] * n))
     RESULTS.mkdir(exist_ok=True)
-    summary = {"max_sweeps": args.max_sweeps, "table": table(scores), "sequences": scores}
-    (RESULTS / "validation_radiance.json").write_text(json.dumps(summary, indent=1))
-    figure(scores, RESULTS / "validation_radiance.png")
+    summary = {
+        "max_sweeps": args.max_sweeps,
+        "table": table(scores),
+        "sky_families": family_table(scores),
+        "sequences": scores,
+    }
+    summary["broken_cloud_sun"] = sun_figure(
+        scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
+    )
+    (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
+    figure(scores, RESULTS / f"{name}.png")
     for cat, row in summary["table"].items():
         print(cat, json.dumps(row))
 
