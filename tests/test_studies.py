@@ -51,8 +51,10 @@ def test_configs_have_seeds():
     for path in sorted((STUDIES / "configs").glob("*.json")):
         cfg = json.loads(path.read_text())
         assert isinstance(cfg["seed"], int), path.name
-        # a study's script is study_<stem>.py, a validation set's generator <stem>.py
+        # a study's script is study_<stem>.py, a validation set's generator
+        # <stem>.py or the one its "generator" names
         scripts = (STUDIES / f"study_{path.stem}.py", STUDIES / f"{path.stem}.py")
+        scripts += (STUDIES / cfg.get("generator", "-"),)
         assert any(p.exists() for p in scripts), path.name
 
 
