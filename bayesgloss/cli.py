@@ -60,7 +60,9 @@ def _demo(args: argparse.Namespace) -> int:
     )
     b = bundle.read_bundle(path)
     base = baseline.bundle_peak_frame_gloss(b)
-    res = estimate.estimate_bundle(b, illumination=cfg.sky, jobs=args.jobs, seed=0)
+    # default options, as a user's bundle gets them: the sky's shape and each
+    # frame's brightness inferred, not told
+    res = estimate.estimate_bundle(b, jobs=args.jobs, seed=0)
     summary = {
         **res.summary,
         "baseline": base.to_json(),
@@ -210,7 +212,7 @@ def _estimate(args: argparse.Namespace) -> int:
 
     from . import estimate
 
-    def progress(done, total, what="facets"):
+    def progress(done, total, what="sweeps at most" if args.per_frame else "facets"):
         if not args.quiet:
             print(
                 f"\rbayesgloss estimate: {done}/{total} {what}", end="", file=sys.stderr, flush=True
@@ -303,7 +305,8 @@ def _estimate_many(args, progress) -> int:
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
-                "max_steps": args.max_steps,
+                "max_steps": args.max_steps
+                or (estimate.JOINT_MAX_SWEEPS if args.per_frame else 8000),
                 # only where set, so that other runs keep their units' keys
                 **({"per_frame": True} if args.per_frame else {}),
             },
@@ -423,9 +426,7 @@ def _parser() -> argparse.ArgumentParser:
         help="the sky's shape (default: 'measured', the Perez sky of the bundle's "
         "frames[].irradiance, where it has them; else gensky-clear, or with --per-frame "
         "'auto', each frame's sky a mixture of gensky's clear, intermediate and overcast "
-        "skies; one of "
-        + ", ".join(sky.sky_models())
-        + ")",
+        "skies; one of " + ", ".join(sky.sky_models()) + ")",
     )
     es.add_argument("--camera", default="auto", choices=["auto", "linear", "power"])
     es.add_argument("--noise", default="relative", choices=["relative", "gaussian", "student"])
@@ -439,8 +440,9 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--max-steps",
         type=int,
-        default=8000,
-        help="production steps at most per facet (unconverged facets are flagged)",
+        default=None,
+        help="production steps at most per facet, or sweeps of the joint sampler "
+        "(default 8000 and 2000; unconverged runs are flagged)",
     )
     es.add_argument(
         "--irradiance",
@@ -452,9 +454,17 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--per-frame",
         action="store_true",
-        help="infer each frame's sun and sky brightness (and the exposure, unless the bundle "
-        "gives it) jointly with the facets, instead of fixing them to the sky model's "
-        "(slower: minutes; see bayesgloss.illumination)",
+        default=True,
+        help="(the default) infer each frame's sun and sky brightness (and the exposure, "
+        "unless the bundle gives it) jointly with the facets (see bayesgloss.illumination)",
+    )
+    es.add_argument(
+        "--fixed-brightness",
+        dest="per_frame",
+        action="store_false",
+        help="fix each frame's sun and sky brightness (and exposure) to the sky model's and "
+        "sample the facets alone (the estimator before per-frame illumination; seconds, "
+        "not a minute, and confidently wrong when the day was not the sky model's)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

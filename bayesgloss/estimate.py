@@ -224,7 +224,7 @@ def _quantiles(x) -> dict:
     }
 
 
-def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options):
+def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options, progress=None):
     """The joint model of facets and per-frame illumination
     (:mod:`bayesgloss.illumination`) on the usable facets and the frames
     any of them sees: (idata, samples, frames used)."""
@@ -246,11 +246,16 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
         exposure = np.ones(int(used.sum()))
     data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
     options = dict(options or {})
-    if "max_steps" in options:  # a sweep of the joint sampler is its step
-        options.setdefault("max_sweeps", options.pop("max_steps"))
+    if options.get("max_steps") is not None:  # a sweep of the joint sampler is its step
+        options.setdefault("max_sweeps", options["max_steps"])
+    options.pop("max_steps", None)
+    options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
     allowed = {"max_sweeps", "min_sweeps", "n_walkers", "n_ensembles", "draws_per_ensemble"}
     samples = sampling.sample_joint(
-        data, seed=seed, **{k: v for k, v in options.items() if k in allowed}
+        data,
+        seed=seed,
+        progress=progress,
+        **{k: v for k, v in options.items() if k in allowed},
     )
     rng = np.random.default_rng(seed)
     th = samples.draws.transpose(1, 0, 2, 3)  # (E, F, S, 4)
@@ -277,11 +282,15 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
         post["sky_weight"] = np.exp(il.log_shape_weights(frames))
         dims["sky_weight"] = ["frame", "sky_model"]
         coords["sky_model"] = list(names)
+    # each draw's log posterior density (up to a constant), sigma at its draw
+    lp = np.nansum(ll, axis=(2, 3)) + il.log_prior_frames(frames, data).sum(-1)
+    lp += il.log_prior_facets(th, data).sum(1)
     idata = az.from_dict(
         posterior=post,
         log_likelihood={"y": ll},
         posterior_predictive={"y": pred},
         observed_data={"y": np.where(data.valid, data.y, np.nan)},
+        sample_stats={"lp": lp},
         coords=coords,
         dims=dims,
     )
@@ -332,6 +341,10 @@ def _sky_model_summary(idata) -> dict | None:
 #: one (without it a glossy lobe stands in for it), and an overcast one.
 AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
 
+#: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
+#: run stops earlier once converged; otherwise it is flagged ``not-converged``).
+JOINT_MAX_SWEEPS = 2000
+
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
 NOT_IDENTIFIABLE_WIDTH = 0.6
@@ -343,7 +356,7 @@ def estimate_bundle(
     illumination: str | None = None,
     noise: str = "relative",
     camera: str = "auto",
-    per_frame: bool = False,
+    per_frame: bool = True,
     seed: int = 0,
     jobs: int = 1,
     progress=None,
@@ -358,29 +371,34 @@ def estimate_bundle(
         The sky's shape: one of :data:`ILLUMINATION_MODELS`; ``"measured"``,
         the Perez sky of the bundle's ``frames[].irradiance``; or ``"auto"``
         (with ``per_frame`` only: each frame's sky a mixture of
-        :data:`AUTO_SKIES`, its weight inferred). Default: ``"measured"``
+        :data:`AUTO_SKIES`, its weights inferred). Default: ``"measured"``
         where the bundle measures every frame with the sun up, else
         ``"auto"`` with ``per_frame`` and ``"gensky-clear"`` without.
     per_frame : bool
         Infer each frame's sun and sky brightness (and the exposure where
         the bundle does not fix it) jointly with the facets
-        (:mod:`bayesgloss.illumination`, :func:`bayesgloss.sampling.sample_joint`);
-        False fixes them to the sky model's (the facets sampled
-        independently). The joint model needs relative noise, a known pixel
-        response and uncensored entries: for other noise models and
-        ``unknown`` encodings the brightnesses are fixed (said in the
-        summary), and saturated entries are left out of it.
+        (:mod:`bayesgloss.illumination`, :func:`bayesgloss.sampling.sample_joint`),
+        the default; False fixes them to the sky model's (the facets
+        sampled independently: ``estimate --fixed-brightness``, the
+        estimator before per-frame illumination). The joint model needs
+        relative noise, a known pixel response and uncensored entries: for
+        other noise models and ``unknown`` encodings the brightnesses are
+        fixed (said in the summary), and saturated entries are left out of
+        it.
     noise : {"relative", "gaussian", "student"}
     camera : {"auto", "linear", "power"}
         ``"auto"``: ``"power"`` for an ``unknown`` pixel encoding, else
         ``"linear"`` (the reader undoes known responses).
-    seed, progress
-        See :func:`bayesgloss.sampling.sample_posterior`.
+    seed : int
+    progress : callable, optional
+        Called with (done, total): facets of the fixed-brightness model, or
+        sweeps of the joint sampler's cap.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
         More keyword arguments for :func:`~bayesgloss.sampling.sample_posterior`
-        (``max_steps``...).
+        (``max_steps``...); for the joint sampler ``max_steps`` caps its
+        sweeps (default :data:`JOINT_MAX_SWEEPS`).
 
     Raises
     ------
@@ -388,6 +406,7 @@ def estimate_bundle(
         Where no facet has :data:`MIN_FRAMES` usable frames.
     """
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
+    sampler_options = {k: v for k, v in (sampler_options or {}).items() if v is not None}
     curves = bundle_io.facet_curves(b)
     if camera == "auto":
         camera = "linear" if b.response_known else "power"
@@ -404,7 +423,7 @@ def estimate_bundle(
         )
     if joint:
         idata, samples, used = _joint_fit(
-            b, curves, y, usable, censored, keep, illumination, seed, sampler_options
+            b, curves, y, usable, censored, keep, illumination, seed, sampler_options, progress
         )
         run = {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"}
     else:
@@ -543,7 +562,7 @@ def estimate_unit(
     noise: str = "relative",
     camera: str = "auto",
     seed: int = 0,
-    max_steps: int = 8000,
+    max_steps: int | None = 8000,
     per_frame: bool = False,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.

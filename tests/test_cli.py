@@ -122,7 +122,20 @@ def test_max_steps_bounds_every_facet(odd_bundles, capsys):
     # the option would report a median of at least 250)
     day = str(odd_bundles["day"])
     assert (
-        cli.main(["estimate", day, "--quiet", "--json", "--max-steps", "100", "--jobs", "1"]) == 0
+        cli.main(
+            [
+                "estimate",
+                day,
+                "--quiet",
+                "--json",
+                "--max-steps",
+                "100",
+                "--jobs",
+                "1",
+                "--fixed-brightness",
+            ]
+        )
+        == 0
     )
     summary = json.loads(capsys.readouterr().out)
     assert summary["sampler"]["median_steps"] == 100

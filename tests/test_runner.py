@@ -34,7 +34,7 @@ def _units(bundles):
                 "noise": "relative",
                 "camera": "auto",
                 "seed": 3,
-                "max_steps": 8000,  # the command line's default
+                "max_steps": 8000,  # the command line's default with --fixed-brightness
             },
         )
         for b in bundles
@@ -60,6 +60,7 @@ def test_killed_run_resumes_without_redoing_finished_units(bundles, tmp_path):
         "--quiet",
         "--seed",
         "3",
+        "--fixed-brightness",  # the units of _units (the joint model's are minutes each)
     ]
     proc = subprocess.Popen(
         cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True

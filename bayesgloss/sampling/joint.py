@@ -45,7 +45,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
 
 from .. import diagnostics
 from .. import illumination as il
