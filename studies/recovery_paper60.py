@@ -38,7 +38,9 @@ def main(argv=None):
     rows = []
     for cfg, path in zip(configs, paths, strict=True):
         b = bundle.read_bundle(path)
-        res = estimate.estimate_bundle(b, illumination=cfg.sky, seed=CONFIG["seed"], jobs=args.jobs)
+        res = estimate.estimate_bundle(
+            b, illumination=cfg.sky, per_frame=False, seed=CONFIG["seed"], jobs=args.jobs
+        )
         base = baseline.bundle_peak_frame_gloss(b)
         o = res.summary["object"]
         truth = b.truth["gloss"]

@@ -70,6 +70,7 @@ def unit(cfg: dict, material: str, roughness: float, cache: str) -> dict[str, by
     res = estimate.estimate_bundle(
         b,
         illumination=sc.sky,
+        per_frame=False,  # the sky and its brightness told: the lobe's mismatch alone
         seed=C.seed_int(C.unit_seed(cfg["seed"], "fit", material, roughness)),
         jobs=1,
         sampler_options=cfg.get("sampler"),
