@@ -288,14 +288,16 @@ def _estimate_many(args, progress) -> int:
 
     if not args.out:
         raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
-    from .irradiance import measured_sky
-
     skies = []
     for b in args.bundle:  # reject bad bundles before any work starts
         bundle = bundle_io.read_bundle(b)
-        # each unit names its sky: measured where the bundle has irradiance
-        default = "auto" if args.per_frame else "gensky-clear"
-        skies.append(args.sky or ("measured" if measured_sky(bundle) is not None else default))
+        # each unit names its sky: the one estimate_bundle would choose
+        skies.append(
+            args.sky
+            or estimate.default_illumination(
+                bundle, per_frame=args.per_frame, noise=args.noise, camera=args.camera
+            )
+        )
     units = [
         (
             Path(b).name,

@@ -76,6 +76,7 @@ __all__ = [
     "ILLUMINATION_MODELS",
     "MIN_FRAMES",
     "estimate_unit",
+    "default_illumination",
     "bundle_bases",
     "bundle_sky",
     "observations",
@@ -246,9 +247,8 @@ def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options
         exposure = np.ones(int(used.sum()))
     data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
     options = dict(options or {})
-    if options.get("max_steps") is not None:  # a sweep of the joint sampler is its step
-        options.setdefault("max_sweeps", options["max_steps"])
-    options.pop("max_steps", None)
+    if "max_steps" in options:  # a sweep of the joint sampler is its step
+        options.setdefault("max_sweeps", options.pop("max_steps"))
     options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
     allowed = {"max_sweeps", "min_sweeps", "n_walkers", "n_ensembles", "draws_per_ensemble"}
     samples = sampling.sample_joint(
@@ -350,6 +350,29 @@ JOINT_MAX_SWEEPS = 2000
 NOT_IDENTIFIABLE_WIDTH = 0.6
 
 
+def _camera(b, camera: str) -> str:
+    """``camera="auto"`` resolved: ``"power"`` for an ``unknown`` encoding, else ``"linear"``."""
+    if camera != "auto":
+        return camera
+    return "linear" if b.response_known else "power"
+
+
+def _joint_possible(per_frame: bool, noise: str, camera: str) -> bool:
+    """Whether the joint model of per-frame illumination applies (a resolved camera)."""
+    return per_frame and noise == "relative" and camera == "linear"
+
+
+def default_illumination(
+    b, *, per_frame: bool = True, noise: str = "relative", camera: str = "auto"
+) -> str:
+    """The sky :func:`estimate_bundle` uses where none is named: ``"measured"``
+    where the bundle measures every frame with the sun up, else ``"auto"``
+    where the joint model applies and ``"gensky-clear"`` where it does not."""
+    if measured_sky(b, b.ground_albedo) is not None:
+        return "measured"
+    return "auto" if _joint_possible(per_frame, noise, _camera(b, camera)) else "gensky-clear"
+
+
 def estimate_bundle(
     path,
     *,
@@ -408,14 +431,12 @@ def estimate_bundle(
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
     sampler_options = {k: v for k, v in (sampler_options or {}).items() if v is not None}
     curves = bundle_io.facet_curves(b)
-    if camera == "auto":
-        camera = "linear" if b.response_known else "power"
+    camera = _camera(b, camera)
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
-    joint = per_frame and noise == "relative" and camera == "linear"
-    if illumination is None:  # measured irradiance where the bundle has it
-        measured = measured_sky(b, b.ground_albedo) is not None
-        illumination = "measured" if measured else "auto" if joint else "gensky-clear"
+    joint = _joint_possible(per_frame, noise, camera)
+    if illumination is None:
+        illumination = default_illumination(b, per_frame=per_frame, noise=noise, camera=camera)
     if illumination == "auto" and not joint:
         raise ValueError(
             "illumination 'auto' (a per-frame mixture of sky shapes) needs per-frame "
