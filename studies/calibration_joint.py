@@ -98,6 +98,7 @@ from pathlib import Path
 import _common
 import numpy as np
 import pandas as pd
+from validation_set import _labels, _sun_z, _uniform, _utc_offset_hours  # the same draws
 
 from bayesgloss import bundle as bundle_io
 from bayesgloss import estimate, pooling, render, runner, sequences, sky, sun
@@ -131,19 +132,6 @@ SUNLIT_COS = 0.05
 # ---------------------------------------------------------------------------
 
 
-def _uniform(rng: np.random.Generator, bounds) -> float:
-    lo, hi = bounds
-    return float(rng.uniform(lo, hi))
-
-
-def _labels(rng: np.random.Generator, counts: dict, n: int) -> list[str]:
-    """``counts`` labels (label -> count, summing to n) in a random order."""
-    items = [k for k, c in counts.items() for _ in range(c)]
-    if len(items) != n:
-        raise ValueError(f"counts {counts} sum to {len(items)}, not {n}")
-    return [items[i] for i in rng.permutation(n)]
-
-
 def _chosen(rng: np.random.Generator, candidates: np.ndarray, k: int, n: int) -> np.ndarray:
     """n booleans, True at ``k`` of the ``candidates`` indices drawn at random."""
     out = np.zeros(n, bool)
@@ -162,19 +150,6 @@ def sky_group(obj: dict) -> str:
         return obj["family"]
     t = int(obj["sky"].split("-")[1])
     return "cie-overcast" if t <= 5 else "cie-partly" if t <= 11 else "cie-clear"
-
-
-def _utc_offset_hours(rng: np.random.Generator, longitude: float, half_fraction: float) -> float:
-    """Civil offset round(lon / 15) h, or a half-hour offset beside it [h]."""
-    if rng.uniform() < half_fraction:
-        offset = np.floor(longitude / 15.0) + 0.5
-    else:
-        offset = float(np.round(longitude / 15.0))
-    return float(np.clip(offset, -12.0, 14.0))
-
-
-def _sun_z(times: pd.DatetimeIndex, latitude: float, longitude: float) -> np.ndarray:
-    return sun.sun_direction_at(times.tz_convert("UTC"), latitude, longitude)[:, 2]
 
 
 def _frame_times(rng, tcfg: dict, scheme: str, date, tz, latitude, longitude, k: int):
