@@ -9,7 +9,21 @@ reported), and returns an :class:`arviz.InferenceData` with groups
 ``posterior``, ``log_likelihood`` (per facet and frame), ``observed_data``,
 ``posterior_predictive`` and ``sample_stats``, plus a JSON-ready summary.
 
-Object-level gloss, beside the paper's average of facets:
+With per-frame illumination (the default), the object's answer is the
+one-material model's (:func:`bayesgloss.sampling.sample_material`): one
+gamma and n for every facet, each facet's albedo from a log-normal
+population of spread tau, every frame's sun, sky and sky shape (and
+exposure) inferred with them; the posterior groups hold ``gamma_object``,
+``n_object``, ``albedo_spread`` (tau) and ``sun_state_weight`` (the day's
+clear, dimmed and hidden sun). Each facet's own posterior (``gamma``...)
+is its sampler's given the object's illumination, averaged over it
+(:func:`bayesgloss.sampling.facets_given_frames`). The summaries below are
+kept beside it (a facet population's mu misled on overcast days: the
+facets' posteriors share the frames, and their product read confident
+answers the data did not hold).
+
+With fixed brightness (``per_frame=False``), object-level gloss, beside the
+paper's average of facets:
 
 - ``population``: a hierarchical model, facet gammas drawn from a Beta
   population of mean mu and concentration kappa, fitted by reweighting the
@@ -52,10 +66,16 @@ import numpy as np
 
 from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
-from . import illumination as il
 from . import likelihood as lk
 from ._thirdparty import arviz
 from .irradiance import measured_sky
+from .joint_estimate import (
+    bundle_sky,
+    frame_summary,
+    joint_fit,
+    sky_model_summary,
+)
+from .joint_estimate import posterior_quantiles as _quantiles
 from .pool import process_pool
 from .pooling import population_gloss, shared_gloss
 from .results import (
@@ -90,20 +110,6 @@ __all__ = [
 ILLUMINATION_MODELS = sky.sky_models()
 #: Usable frames a facet's curve needs at least.
 MIN_FRAMES = 4
-
-
-def bundle_sky(b, illumination: str, ground_reflectance: float):
-    """The sky of a bundle's frames: a sky model by name, or ``"measured"``,
-    the Perez sky of its ``frames[].irradiance`` (:func:`bayesgloss.irradiance.measured_sky`)."""
-    if illumination == "measured":
-        day = measured_sky(b, ground_reflectance)
-        if day is None:
-            raise ValueError(
-                f"bundle '{b.path}': illumination 'measured' needs frames[].irradiance "
-                "(DNI and DHI, or GHI) for every frame with the sun up"
-            )
-        return day
-    return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
 
 
 def bundle_bases(
@@ -206,145 +212,6 @@ def to_inference_data(
     return idata
 
 
-def _quantiles(x) -> dict:
-    """Median, 5 and 95 % quantiles, and the 90 % highest-density interval.
-
-    For a gamma at the edge of [0, 1] the equal-tailed interval cannot hold
-    the edge; the highest-density interval can.
-    """
-    az = arviz()
-
-    x = np.asarray(x, float).ravel()
-    q = np.quantile(x, [0.05, 0.5, 0.95])
-    hdi = az.hdi(x, hdi_prob=0.9)
-    return {
-        "median": float(q[1]),
-        "q05": float(q[0]),
-        "q95": float(q[2]),
-        "hdi90": [float(hdi[0]), float(hdi[1])],
-    }
-
-
-def _joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options, progress=None):
-    """The joint model of facets and per-frame illumination
-    (:mod:`bayesgloss.illumination`) on the usable facets and the frames
-    any of them sees: (idata, samples, frames used)."""
-    az = arviz()
-    rho = b.ground_albedo
-    names = AUTO_SKIES if illumination == "auto" else (illumination,)
-    day, *others = (bundle_sky(b, name, rho) for name in names)
-    ground = "sky" if illumination == "point-sun" else "plane"
-    ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
-    used = ok.any(axis=0) & b.sun_up
-    geometry = b.view_geometry()
-    bases = il.illumination_bases(
-        geometry, day, others=others, ground=ground, ground_reflectance=rho
-    ).take(keep, used)
-    exposure = None
-    if b.exposure is not None:
-        exposure = b.exposure[used]
-    elif b.pixel_encoding == "linear-radiance":
-        exposure = np.ones(int(used.sum()))
-    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
-    options = dict(options or {})
-    if "max_steps" in options:  # a sweep of the joint sampler is its step
-        options.setdefault("max_sweeps", options.pop("max_steps"))
-    options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
-    allowed = {"max_sweeps", "min_sweeps", "n_walkers", "n_ensembles", "draws_per_ensemble"}
-    samples = sampling.sample_joint(
-        data,
-        seed=seed,
-        progress=progress,
-        **{k: v for k, v in options.items() if k in allowed},
-    )
-    rng = np.random.default_rng(seed)
-    th = samples.draws.transpose(1, 0, 2, 3)  # (E, F, S, 4)
-    frames = samples.frames  # (E, S, T, L)
-    ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
-    pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
-    post = {
-        "gamma": th[..., 0].transpose(0, 2, 1),
-        "n": np.exp(th[..., 1]).transpose(0, 2, 1),
-        "s": np.exp(th[..., 2]).transpose(0, 2, 1),
-        "sigma": np.exp(th[..., 3]).transpose(0, 2, 1),
-        "sun": np.exp(frames[..., 1]),
-        "sky": np.exp(frames[..., 2]),
-    }
-    if exposure is None:
-        post["exposure"] = np.exp(frames[..., 0])
-    dims = {
-        **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
-        **{v: ["frame"] for v in ("sun", "sky", "exposure")},
-        "y": ["facet", "frame"],
-    }
-    coords = {"facet": curves.ids[keep], "frame": np.flatnonzero(used)}
-    if data.shapes >= 2:  # each frame's weights of the sky models
-        post["sky_weight"] = np.exp(il.log_shape_weights(frames))
-        dims["sky_weight"] = ["frame", "sky_model"]
-        coords["sky_model"] = list(names)
-    # each draw's log posterior density (up to a constant), sigma at its draw
-    lp = np.nansum(ll, axis=(2, 3)) + il.log_prior_frames(frames, data).sum(-1)
-    lp += il.log_prior_facets(th, data).sum(1)
-    idata = az.from_dict(
-        posterior=post,
-        log_likelihood={"y": ll},
-        posterior_predictive={"y": pred},
-        observed_data={"y": np.where(data.valid, data.y, np.nan)},
-        sample_stats={"lp": lp},
-        coords=coords,
-        dims=dims,
-    )
-    idata.observed_data["valid"] = (("facet", "frame"), data.valid)
-    idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
-    idata.observed_data["time"] = (
-        ("frame",),
-        b.times[used].tz_convert("UTC").tz_localize(None),
-    )
-    return idata, samples, used
-
-
-def _frame_summary(idata, b, used) -> list:
-    """Each frame's inferred sun, sky (relative to the sky model's) and exposure."""
-    out = []
-    for j, t in enumerate(np.flatnonzero(used)):
-        entry = {"frame": int(t), "time": b.times[t].isoformat()}
-        for v in ("sun", "sky", "exposure"):
-            if v in idata.posterior:
-                entry[v] = _quantiles(idata.posterior[v].values[..., j])
-        if "sky_weight" in idata.posterior:
-            weights = idata.posterior["sky_weight"]
-            entry["sky_weight"] = {
-                str(name): _quantiles(weights.values[..., j, k])
-                for k, name in enumerate(weights["sky_model"].values)
-            }
-        out.append(entry)
-    return out
-
-
-def _sky_model_summary(idata) -> dict | None:
-    """The posterior weight of each sky model, averaged over frames, and the
-    one with the most (None with one sky model)."""
-    if "sky_weight" not in idata.posterior:
-        return None
-    weights = idata.posterior["sky_weight"]
-    mean = weights.values.mean(axis=(0, 1, 2))
-    names = [str(x) for x in weights["sky_model"].values]
-    return {
-        "weights": {n: float(m) for n, m in zip(names, mean, strict=True)},
-        "most_weight": names[int(np.argmax(mean))],
-    }
-
-
-#: ``illumination="auto"`` with per-frame illumination: each frame's sky a
-#: mixture of these shapes, its weights inferred (:mod:`bayesgloss.illumination`):
-#: a clear sky, the broad circumsolar brightening of an intermediate or hazy
-#: one (without it a glossy lobe stands in for it), and an overcast one.
-AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
-
-#: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
-#: run stops earlier once converged; otherwise it is flagged ``not-converged``).
-JOINT_MAX_SWEEPS = 2000
-
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
 NOT_IDENTIFIABLE_WIDTH = 0.6
@@ -443,10 +310,15 @@ def estimate_bundle(
             "illumination (relative noise and a known pixel response); name a sky model"
         )
     if joint:
-        idata, samples, used = _joint_fit(
+        idata, samples, used = joint_fit(
             b, curves, y, usable, censored, keep, illumination, seed, sampler_options, progress
         )
-        run = {"seconds": samples.seconds, "sweeps": samples.n_sweeps, "model": "joint"}
+        run = {
+            "seconds": samples.seconds + samples.facets.seconds,
+            "sweeps": samples.n_sweeps,
+            "facet_seconds": samples.facets.seconds,
+            "model": "joint",
+        }
     else:
         idata, samples = _facets_fit(
             b,
@@ -544,9 +416,14 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     shared = shared_gloss(
         np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data_priors
     )
-    obj_q = _quantiles(pop["mu"])
-    # the joint sampler's rule covers every frame's latents too
-    obj_converged = bool(np.all(conv)) and len(ids) > 0 and getattr(samples, "converged", True)
+    if "gamma_object" in idata.posterior:  # the one-material model's own answer
+        obj_q = _quantiles(idata.posterior["gamma_object"].values)
+        obj_converged = bool(samples.converged) and len(ids) > 0
+        model = "one material (shared gamma and n, hierarchical albedo, per-frame light)"
+    else:
+        obj_q = _quantiles(pop["mu"])
+        obj_converged = bool(np.all(conv)) and len(ids) > 0
+        model = "population (hierarchical Beta)"
     obj_flags = [] if obj_converged else ["not-converged"]
     if obj_q["q95"] - obj_q["q05"] > NOT_IDENTIFIABLE_WIDTH:
         obj_flags.append("gloss-not-identifiable")
@@ -556,7 +433,8 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
             "flags": obj_flags,
             "n": {"median": shared["n_median"]},
             "converged": obj_converged,
-            "model": "population (hierarchical Beta)",
+            "model": model,
+            "facet_population_gamma": _quantiles(pop["mu"]),
             "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
             "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
             "facets_converged": int(conv.sum()),
@@ -572,8 +450,15 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         "per_frame_illumination": used is not None,
     }
     if used is not None:
-        summary["frames"] = _frame_summary(idata, b, used)
-        summary["sky_models"] = _sky_model_summary(idata)
+        summary["frames"] = frame_summary(idata, b, used)
+        summary["sky_models"] = sky_model_summary(idata)
+        post = idata.posterior
+        summary["object"]["n"] = _quantiles(post["n_object"].values)
+        summary["object"]["albedo_spread"] = _quantiles(post["albedo_spread"].values)
+        states = post["sun_state_weight"].values.mean(axis=(0, 1))
+        summary["sun_state"] = {
+            str(k): float(v) for k, v in zip(post["sun_state"].values, states, strict=True)
+        }
     return EstimateResult(idata, summary, samples)
 
 

@@ -48,7 +48,12 @@ turbidity), and a sun dimmed or hidden by cloud (weight 0.2, N(-2.5,
 1.5^2): down to a few per cent); log b_t ~ N(0, 0.7^2) (a sky half or
 twice as bright at 1 sd: haze, broken cloud); w_t uniform on the simplex
 (Dirichlet(1, ..., 1): in the u coordinates, log density sum_k log w_tk);
-log e_t ~ N(0, 2^2) where the exposure is unknown.
+log e_t ~ N(0, 2^2) where the exposure is unknown. The one-material model
+(:func:`log_prior_material`) gives the sun a third, hidden component
+(N(-9, 2^2): below the noise of any curve) and lets the day choose the
+three components' weights (uniform on the simplex), so that a day whose
+every frame is overcast is as plausible a priori as a clear one
+(:func:`log_prior_frames` with ``log_sun_weights``).
 The facets' priors are those of :class:`bayesgloss.likelihood.Priors`.
 """
 
@@ -74,6 +79,11 @@ __all__ = [
     "joint_data",
     "log_prior_facets",
     "log_prior_frames",
+    "log_prior_material",
+    "log_sun_weights",
+    "material_m_center",
+    "MATERIAL_M_SD",
+    "MATERIAL_LOG_TAU",
     "unit_parts",
     "frame_weights",
     "predict",
@@ -81,6 +91,7 @@ __all__ = [
     "frame_log_likelihood",
     "pointwise_log_likelihood",
     "sample_prior",
+    "sample_prior_material",
     "simulate",
     "LATENTS",
     "latent_names",
@@ -101,6 +112,8 @@ class IlluminationPriors:
     sun_cloud_weight: float = 0.2
     sun_cloud_mean: float = -2.5
     sun_cloud_sd: float = 1.5
+    sun_hidden_mean: float = -9.0
+    sun_hidden_sd: float = 2.0
     sky_sd: float = 0.7
     exposure_sd: float = 2.0
 
@@ -398,15 +411,74 @@ def log_prior_facets(theta, data: JointData) -> np.ndarray:
     return np.where(inside, lp, -np.inf)
 
 
-def log_prior_frames(lam, data: JointData) -> np.ndarray:
-    """Log prior of each frame's latents, (...) for lam (..., L) (module docstring)."""
+#: The one-material model (:mod:`bayesgloss.sampling.material`): sd of the
+#: prior of m, the facets' mean log scale, about the data's centre (natural log).
+MATERIAL_M_SD = 3.0
+#: Range of log tau, the sd of the facets' log scales about m, under its
+#: log-uniform prior: from 1 % (one paint, the model's geometry right) to a
+#: factor of 20 (facets whose albedos tell nothing of each other).
+MATERIAL_LOG_TAU = (float(np.log(0.01)), float(np.log(3.0)))
+
+
+def material_m_center(data: JointData) -> float:
+    """The prior centre of m: the median over facets of the data's log scale."""
+    return float(np.median(data.log_s_center))
+
+
+def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
+    """Log prior of the one-material model's facet and day parts, (E, W), for
+    theta (E, F, W, >= 3) (gamma and log n the same for every facet) and
+    hyper (E, W, 4) = (m, log tau, v_1, v_2): uniform gamma and log n, log
+    s_f ~ N(m, tau^2), m ~ N(:func:`material_m_center`, :data:`MATERIAL_M_SD`^2),
+    log tau uniform on :data:`MATERIAL_LOG_TAU`, the day's sun weights
+    (:func:`log_sun_weights`) uniform on the simplex (Dirichlet(1, 1, 1) in
+    the log-ratio coordinates v); -inf outside the support. The frames'
+    priors given the sun weights are :func:`log_prior_frames`'."""
+    p = data.priors
+    gamma, log_n, log_s = theta[:, 0, :, 0], theta[:, 0, :, 1], theta[..., 2]
+    m, log_tau = hyper[..., 0], hyper[..., 1]
+    lo, hi = MATERIAL_LOG_TAU
+    inside = (gamma >= 0) & (gamma <= 1) & (log_n >= p.log_n[0]) & (log_n <= p.log_n[1])
+    inside &= (log_tau >= lo) & (log_tau <= hi)
+    tau = np.exp(log_tau)
+    z = (log_s - m[:, None]) / tau[:, None]
+    lp = np.sum(-0.5 * z * z, axis=1) - data.shape[0] * log_tau
+    lp = lp - 0.5 * ((m - material_m_center(data)) / MATERIAL_M_SD) ** 2
+    if hyper.shape[-1] > 2:  # the day's sun weights, uniform on the simplex
+        lp = lp + np.sum(log_sun_weights(hyper), axis=-1)
+    return np.where(inside, lp, -np.inf)
+
+
+def log_sun_weights(hyper) -> np.ndarray:
+    """log weights of the sun's clear, dimmed and hidden components for the
+    day, (..., 3), from the one-material model's hyper (..., 4): the softmax
+    of (0, v_1, v_2), its last two coordinates."""
+    v = np.concatenate([np.zeros_like(hyper[..., :1]), hyper[..., 2:4]], axis=-1)
+    return v - special.logsumexp(v, axis=-1, keepdims=True)
+
+
+def log_prior_frames(lam, data: JointData, log_sun_weights=None) -> np.ndarray:
+    """Log prior of each frame's latents, (..., T) for lam (..., T, L) (module docstring).
+
+    ``log_sun_weights`` (..., 3): the log weights of the sun's clear, dimmed
+    and hidden components for the day (the one-material model's day-level
+    sun state, :mod:`bayesgloss.sampling.material`); None: the fixed
+    two-part mixture (clear 0.8, dimmed 0.2).
+    """
     q = data.frame_priors
     log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
-    clear = np.log1p(-q.sun_cloud_weight) - 0.5 * (log_a / q.sun_clear_sd) ** 2
-    clear -= np.log(q.sun_clear_sd)
-    cloud = np.log(q.sun_cloud_weight) - 0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2
-    cloud -= np.log(q.sun_cloud_sd)
-    lp = np.logaddexp(clear, cloud) - 0.5 * (log_b / q.sky_sd) ** 2
+    clear = -0.5 * (log_a / q.sun_clear_sd) ** 2 - np.log(q.sun_clear_sd)
+    cloud = -0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2 - np.log(q.sun_cloud_sd)
+    if log_sun_weights is None:
+        sun = np.logaddexp(
+            clear + np.log1p(-q.sun_cloud_weight), cloud + np.log(q.sun_cloud_weight)
+        )
+    else:
+        hidden = -0.5 * ((log_a - q.sun_hidden_mean) / q.sun_hidden_sd) ** 2
+        hidden -= np.log(q.sun_hidden_sd)
+        w = np.asarray(log_sun_weights)[..., None, :]
+        sun = special.logsumexp(np.stack([clear, cloud, hidden], -1) + w, axis=-1)
+    lp = sun - 0.5 * (log_b / q.sky_sd) ** 2
     if data.shapes >= 2:  # w uniform on the simplex: sum_k log w_k in the u coordinates
         lp = lp + np.sum(log_shape_weights(lam), axis=-1)
     if data.exposure_known:
@@ -545,6 +617,29 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
         log_w = np.log(rng.dirichlet(np.ones(data.shapes), size=(size, t)))
         lam[..., 3:] = log_w[..., 1:] - log_w[..., :1]
     return th, lam
+
+
+def sample_prior_material(data: JointData, size: int, rng: np.random.Generator):
+    """Draws from the one-material model's prior (:func:`log_prior_material`):
+    theta (F, size, 4) (gamma and log n shared, log sigma per facet log-uniform),
+    hyper (size, 4) and lam (size, T, L), each frame's sun from the day's
+    three-part mixture."""
+    p, q = data.priors, data.frame_priors
+    f, t = data.shape
+    th, lam = sample_prior(data, size, rng)
+    th[..., 0] = rng.uniform(0, 1, size)[None, :]
+    th[..., 1] = rng.uniform(*p.log_n, size)[None, :]
+    hyper = np.empty((size, 4))
+    hyper[:, 0] = material_m_center(data) + MATERIAL_M_SD * rng.standard_normal(size)
+    hyper[:, 1] = rng.uniform(*MATERIAL_LOG_TAU, size)
+    th[..., 2] = hyper[None, :, 0] + np.exp(hyper[None, :, 1]) * rng.standard_normal((f, size))
+    weights = rng.dirichlet(np.ones(3), size=size)  # clear, dimmed, hidden
+    hyper[:, 2:] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
+    state = (rng.random((size, t, 1)) > np.cumsum(weights, axis=1)[:, None, :]).sum(-1)
+    means = np.array([0.0, q.sun_cloud_mean, q.sun_hidden_mean])
+    sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])
+    lam[..., 1] = means[state] + sds[state] * rng.standard_normal((size, t))
+    return th, hyper, lam
 
 
 def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarray:

@@ -335,8 +335,15 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     up = int(np.sum(b.sun_up))
     assert len(s["frames"]) == up == res.idata.posterior["sun"].shape[-1]
     sun = np.array([f["sun"]["median"] for f in s["frames"]])
-    # away from dawn and dusk the sun reads the model's within 20 %
-    assert np.all(np.abs(np.log(sun[2:-2])) < np.log(1.2)), sun
+    # away from dawn and dusk the sun's course over the day reads the model's
+    # within 15 %; its level (which only the priors of the frames and of the
+    # albedo tie to the facets' scale) within 25 %. A frame whose sun is read
+    # from the wrong part of the curves (the sky's, say) is off by far more
+    level = np.median(sun[2:-2])
+    assert abs(np.log(level)) < np.log(1.25), sun
+    assert np.all(np.abs(np.log(sun[2:-2] / level)) < np.log(1.15)), sun
+    assert s["object"]["model"].startswith("one material")
+    assert "gamma_object" in res.idata.posterior and "sun_state_weight" in res.idata.posterior
     assert "exposure" not in res.idata.posterior  # linear-radiance: exposure known
     estimate.write_result(tmp_path / "out", res)
     back = estimate.read_result(tmp_path / "out")

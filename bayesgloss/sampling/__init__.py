@@ -22,7 +22,11 @@ runs one problem at a time and its per-step overhead dominates for a
   deals facets into streams and runs them, in this process or on a pool;
 - :mod:`~bayesgloss.sampling.joint`: :func:`sample_joint`, the facets and
   each frame's sun, sky and exposure together (Metropolis within Gibbs,
-  every walker a whole state), for :mod:`bayesgloss.illumination`.
+  every walker a whole state), for :mod:`bayesgloss.illumination`;
+- :mod:`~bayesgloss.sampling.material`: :func:`sample_material`, the same
+  scheme for the one-material model (shared gamma and n, hierarchical
+  albedo: the object's answer), and :func:`facets_given_frames`, each
+  facet's own posterior given the object's illumination.
 
 Autocorrelation times, R-hat, ESS and the convergence rule live in
 :mod:`bayesgloss.diagnostics`. On the paper's facets the median integrated
@@ -36,6 +40,7 @@ from .coordinates import RIDGE_MAX_RMS, RidgeCoordinates
 from .ensemble import BatchedEnsemble
 from .joint import JointSamples, sample_joint
 from .jumps import ExponentJump
+from .material import facets_given_frames, sample_material
 from .moves import DEFAULT_MOVES, FACET_MOVES, PLAIN_JUMP
 from .posterior import PosteriorSamples, sample_posterior
 from .starts import initial_ensemble
@@ -43,6 +48,8 @@ from .streams import FIRST_CHECK_TAUS, FacetStream
 
 __all__ = [
     "BatchedEnsemble",
+    "sample_material",
+    "facets_given_frames",
     "DEFAULT_MOVES",
     "FACET_MOVES",
     "PLAIN_JUMP",

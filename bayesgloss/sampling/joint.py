@@ -84,6 +84,8 @@ class JointSamples:
     acceptance : dict
         Acceptance rates of the facet and frame moves.
     seconds : float
+    material : ndarray (E, S, 2) or None
+        The one-material model's m and log tau (:mod:`bayesgloss.sampling.material`).
     """
 
     draws: np.ndarray
@@ -96,6 +98,7 @@ class JointSamples:
     acceptance: dict
     seconds: float
     parameters: tuple = ("gamma", "log_n", "log_s", "log_sigma")
+    material: np.ndarray | None = None
 
 
 class _JointChain:
@@ -176,10 +179,13 @@ class _JointChain:
     def _draw_log_sigma(self, q):
         return _log_sigma_draws(q, self.cd, self.rng)
 
-    def _frame_density(self, th, lam, parts, log_sigma):
-        return il.frame_log_likelihood(th, lam, log_sigma, self.data, parts) + il.log_prior_frames(
-            lam, self.data
-        )
+    def _frame_prior(self, lam, walkers=slice(None)):
+        """Each frame's log prior, (E, H, T), for the walkers' lam (E, H, T, L)."""
+        return il.log_prior_frames(lam, self.data)
+
+    def _frame_density(self, th, lam, parts, log_sigma, walkers=slice(None)):
+        frame_ll = il.frame_log_likelihood(th, lam, log_sigma, self.data, parts)
+        return frame_ll + self._frame_prior(lam, walkers)
 
     def _frame_moves(self, th, parts, log_sigma) -> None:
         """Random-walk Metropolis on each frame's latents, half the walkers at a
@@ -199,7 +205,7 @@ class _JointChain:
             scale = 2.38 / np.sqrt(d) * (0.3 if rng.random() < 0.3 else 1.0)
             z = rng.standard_normal(chol.shape[:-1])
             prop = self.lam[:, idx] + scale * np.einsum("ewtij,ewtj->ewti", chol, z) * self.free
-            new = self._frame_density(th[:, :, idx], prop, sub, log_sigma[:, :, idx])
+            new = self._frame_density(th[:, :, idx], prop, sub, log_sigma[:, :, idx], idx)
             ok = np.log(rng.random(new.shape)) < new - cur[:, idx]
             self.lam[:, idx] = np.where(ok[..., None], prop, self.lam[:, idx])
             cur[:, idx] = np.where(ok, new, cur[:, idx])
@@ -258,7 +264,7 @@ class _JointChain:
         lp = il.log_prior_facets(th, self.data)
         ll = il.log_likelihood_sigma_marginal(th, lam, self.data)
         out = np.sum(np.where(np.isfinite(lp), lp + ll, -np.inf), axis=1)
-        return out + il.log_prior_frames(lam, self.data).sum(-1)
+        return out + self._frame_prior(lam).sum(-1)
 
     def adapt(self, states) -> None:
         """Directions for the collective moves from burn-in states (n, E, W, D).
@@ -279,10 +285,7 @@ class _JointChain:
         cov += 1e-12 * np.trace(cov) / d * np.eye(d)
         prec = np.linalg.inv(cov)
         cond = np.zeros_like(cov)
-        blocks = [slice(3 * i, 3 * i + 3) for i in range(self.f)]
-        k = int(self.free.sum())
-        blocks += [slice(3 * self.f + k * i, 3 * self.f + k * (i + 1)) for i in range(self.t)]
-        for b in blocks:
+        for b in self._blocks():
             cond[b, b] = np.linalg.inv(prec[b, b])
         vals, vecs = linalg.eigh(cov, cond)
         top = np.argsort(vals)[::-1][:COLLECTIVE]
@@ -291,6 +294,13 @@ class _JointChain:
         vecs /= np.sqrt(np.einsum("di,de,ei->i", vecs, prec, vecs))
         self.directions = vecs.T  # (K, D)
         self.inflation = vals[top]
+
+    def _blocks(self) -> list[slice]:
+        """The Gibbs blocks' slices of :meth:`state`: each facet's (gamma, log
+        n, log s), then each frame's free latents."""
+        k = int(self.free.sum())
+        blocks = [slice(3 * i, 3 * i + 3) for i in range(self.f)]
+        return blocks + [slice(3 * self.f + k * i, 3 * self.f + k * (i + 1)) for i in range(self.t)]
 
     def collective_moves(self) -> None:
         """A random-walk Metropolis step along each adapted direction (module docstring)."""
@@ -316,7 +326,7 @@ class _JointChain:
         direction = np.zeros(self.data.n_latents)
         direction[:3] = 1.0, -1.0, -1.0
         prop = self.lam + c[..., None] * direction
-        ratio = il.log_prior_frames(prop, self.data) - il.log_prior_frames(self.lam, self.data)
+        ratio = self._frame_prior(prop) - self._frame_prior(self.lam)
         ok = np.log(self.rng.random(ratio.shape)) < ratio
         self.lam = np.where(ok[..., None], prop, self.lam)
 
@@ -497,11 +507,32 @@ def sample_joint(
     -------
     JointSamples
     """
-    t0 = time.perf_counter()
     if n_walkers < 6 or n_walkers % 2:
         raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
     rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
     chain = _JointChain(data, n_ensembles, n_walkers, rng)
+    return run_chain(chain, rng, chunk, min_sweeps, max_sweeps, draws_per_ensemble, progress, t0)
+
+
+def run_chain(
+    chain: _JointChain,
+    rng,
+    chunk: int,
+    min_sweeps: int,
+    max_sweeps: int,
+    draws_per_ensemble: int,
+    progress,
+    t0: float,
+    diagnosed_facets: int | None = None,
+) -> JointSamples:
+    """Burn-in (adapting the collective directions), then sweeps in chunks
+    until converged or ``max_sweeps``; the kept second half thinned to
+    :class:`JointSamples` (``material`` from the chain's ``hyper``, if any).
+    ``diagnosed_facets``: the facets whose gamma the rule checks (None: all;
+    1 where gamma is shared)."""
+    data = chain.data
+    n_walkers, n_ensembles = chain.w, chain.e
     for length in BURN_ROUNDS:
         states = []
         for _ in range(length):
@@ -510,7 +541,9 @@ def sample_joint(
                 states.append(chain.state())
         chain.adapt(np.stack(states[len(states) // 2 :]))
     burn = chain.sweeps
-    th_kept, lam_kept = [], []
+    hyper = getattr(chain, "hyper", None)
+    th_kept, lam_kept, hyper_kept = [], [], []
+    pick = slice(None) if diagnosed_facets is None else slice(0, diagnosed_facets)
     diag = None
     while chain.sweeps < burn + max_sweeps:
         for _ in range(chunk):
@@ -518,26 +551,35 @@ def sample_joint(
             if chain.sweeps % THIN == 0:
                 th_kept.append(chain.th.astype(np.float32))
                 lam_kept.append(chain.lam.astype(np.float32))
+                if hyper is not None:
+                    hyper_kept.append(chain.hyper.copy())
         if progress:
             progress(chain.sweeps - burn, max_sweeps)
         if chain.sweeps - burn >= min_sweeps:
             half = len(th_kept) // 2
-            diag = _diagnosed(np.stack(th_kept[half:]), np.stack(lam_kept[half:]))
+            diag = _diagnosed(
+                np.stack([x[:, pick] for x in th_kept[half:]]), np.stack(lam_kept[half:])
+            )
             if np.all(diag[3]):
                 break
     half = len(th_kept) // 2
     th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, 3)
     lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, L)
     if diag is None:
-        diag = _diagnosed(th, lam)
+        diag = _diagnosed(th[:, :, pick], lam)
     n = len(th)
     keep = np.linspace(0, n - 1, max(1, min(n, draws_per_ensemble // n_walkers))).round()
-    th, lam = th[keep.astype(int)], lam[keep.astype(int)]
+    keep = keep.astype(int)
+    th, lam = th[keep], lam[keep]
     m = len(th)
     e, f, w = n_ensembles, data.shape[0], n_walkers
     # (m, E, F, W, 3) -> (F, E, W m, 3), walkers one after another
     draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, 3)
     frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], data.n_latents)
+    material = None
+    if hyper is not None:  # (m, E, W, 2) -> (E, W m, 2)
+        hk = np.stack(hyper_kept[half:])[keep]
+        material = hk.transpose(1, 2, 0, 3).reshape(e, w * m, -1)
     # log sigma from its conditional at every draw
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
     _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
@@ -554,4 +596,5 @@ def sample_joint(
         chain.sweeps,
         {k: v / sweeps for k, v in chain.accepted.items()},
         time.perf_counter() - t0,
+        material=material,
     )

@@ -1,0 +1,214 @@
+"""The joint estimate of a bundle: one material and each frame's light.
+
+The default of :func:`bayesgloss.estimate.estimate_bundle`: the bundle's
+usable facets and sun-up frames (:func:`joint_inputs`) fitted by the
+one-material model with per-frame illumination
+(:func:`bayesgloss.sampling.sample_material`), each facet's own posterior
+given the object's illumination
+(:func:`bayesgloss.sampling.facets_given_frames`), gathered in an
+:class:`arviz.InferenceData` (:func:`joint_fit`); :func:`frame_summary` and
+:func:`sky_model_summary` are its parts of the summary.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import illumination as il
+from . import sampling, sky
+from ._thirdparty import arviz
+from .irradiance import measured_sky
+
+__all__ = [
+    "AUTO_SKIES",
+    "JOINT_MAX_SWEEPS",
+    "FACETS_GIVEN_FRAMES_STEPS",
+    "bundle_sky",
+    "joint_inputs",
+    "joint_fit",
+    "frame_summary",
+    "sky_model_summary",
+    "posterior_quantiles",
+]
+
+#: ``illumination="auto"`` with per-frame illumination: each frame's sky a
+#: mixture of these shapes, its weights inferred (:mod:`bayesgloss.illumination`):
+#: a clear sky, the broad circumsolar brightening of an intermediate or hazy
+#: one (without it a glossy lobe stands in for it), and an overcast one.
+AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
+
+#: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
+#: run stops earlier once converged; otherwise it is flagged ``not-converged``).
+JOINT_MAX_SWEEPS = 2000
+
+#: Step cap of each facet's own sampler given the object's illumination
+#: (:func:`bayesgloss.sampling.facets_given_frames`).
+FACETS_GIVEN_FRAMES_STEPS = 4000
+
+
+def bundle_sky(b, illumination: str, ground_reflectance: float):
+    """The sky of a bundle's frames: a sky model by name, or ``"measured"``,
+    the Perez sky of its ``frames[].irradiance`` (:func:`bayesgloss.irradiance.measured_sky`)."""
+    if illumination == "measured":
+        day = measured_sky(b, ground_reflectance)
+        if day is None:
+            raise ValueError(
+                f"bundle '{b.path}': illumination 'measured' needs frames[].irradiance "
+                "(DNI and DHI, or GHI) for every frame with the sun up"
+            )
+        return day
+    return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
+
+
+def joint_inputs(b, y, usable, censored, keep, illumination):
+    """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
+    the usable facets ``keep`` and the frames any of them sees with the sun
+    up: (data, frames used (T,) of bool, sky model names)."""
+    rho = b.ground_albedo
+    names = AUTO_SKIES if illumination == "auto" else (illumination,)
+    day, *others = (bundle_sky(b, name, rho) for name in names)
+    ground = "sky" if illumination == "point-sun" else "plane"
+    ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
+    used = ok.any(axis=0) & b.sun_up
+    geometry = b.view_geometry()
+    bases = il.illumination_bases(
+        geometry, day, others=others, ground=ground, ground_reflectance=rho
+    ).take(keep, used)
+    exposure = None
+    if b.exposure is not None:
+        exposure = b.exposure[used]
+    elif b.pixel_encoding == "linear-radiance":
+        exposure = np.ones(int(used.sum()))
+    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
+    return data, used, names
+
+
+def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options, progress=None):
+    """The joint model of facets and per-frame illumination
+    (:mod:`bayesgloss.illumination`) on the usable facets and the frames
+    any of them sees: (idata, samples, frames used)."""
+    az = arviz()
+    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination)
+    options = dict(options or {})
+    if "max_steps" in options:  # a sweep of the joint sampler is its step
+        options.setdefault("max_sweeps", options.pop("max_steps"))
+    options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
+    allowed = {"max_sweeps", "min_sweeps", "n_walkers", "n_ensembles", "draws_per_ensemble"}
+    samples = sampling.sample_material(
+        data,
+        seed=seed,
+        progress=progress,
+        **{k: v for k, v in options.items() if k in allowed},
+    )
+    rng = np.random.default_rng(seed)
+    th = samples.draws.transpose(1, 0, 2, 3)  # (E, F, S, 4): gamma and n shared
+    frames = samples.frames  # (E, S, T, L)
+    ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
+    pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
+    facet_draws, facet_run = sampling.facets_given_frames(
+        data, frames, seed=seed, max_steps=FACETS_GIVEN_FRAMES_STEPS
+    )
+    fd = facet_draws.transpose(1, 2, 0, 3)  # (E, S', F, 4)
+    hyper = samples.material  # (E, S, 4)
+    post = {
+        "gamma_object": th[:, 0, :, 0],
+        "n_object": np.exp(th[:, 0, :, 1]),
+        "albedo_spread": np.exp(hyper[..., 1]),
+        "sun_state_weight": np.exp(il.log_sun_weights(hyper)),
+        "gamma": fd[..., 0],
+        "n": np.exp(fd[..., 1]),
+        "s": np.exp(fd[..., 2]),
+        "sigma": np.exp(fd[..., 3]),
+        "sun": np.exp(frames[..., 1]),
+        "sky": np.exp(frames[..., 2]),
+    }
+    if data.log_exposure is None:
+        post["exposure"] = np.exp(frames[..., 0])
+    if fd.shape[1] != th.shape[2]:  # the facets' draws on their own axis
+        raise RuntimeError("facet draws and object draws differ in number")
+    dims = {
+        **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
+        **{v: ["frame"] for v in ("sun", "sky", "exposure")},
+        "sun_state_weight": ["sun_state"],
+        "y": ["facet", "frame"],
+    }
+    coords = {
+        "facet": curves.ids[keep],
+        "frame": np.flatnonzero(used),
+        "sun_state": ["clear", "dimmed", "hidden"],
+    }
+    if data.shapes >= 2:  # each frame's weights of the sky models
+        post["sky_weight"] = np.exp(il.log_shape_weights(frames))
+        dims["sky_weight"] = ["frame", "sky_model"]
+        coords["sky_model"] = list(names)
+    # each draw's log posterior density (up to a constant), sigma at its draw
+    lp = np.nansum(ll, axis=(2, 3)) + il.log_prior_material(th, hyper, data)
+    lp += il.log_prior_frames(frames, data, il.log_sun_weights(hyper)).sum(-1)
+    samples.facets = facet_run
+    idata = az.from_dict(
+        posterior=post,
+        log_likelihood={"y": ll},
+        posterior_predictive={"y": pred},
+        observed_data={"y": np.where(data.valid, data.y, np.nan)},
+        sample_stats={"lp": lp},
+        coords=coords,
+        dims=dims,
+    )
+    idata.observed_data["valid"] = (("facet", "frame"), data.valid)
+    idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
+    idata.observed_data["time"] = (
+        ("frame",),
+        b.times[used].tz_convert("UTC").tz_localize(None),
+    )
+    return idata, samples, used
+
+
+def frame_summary(idata, b, used) -> list:
+    """Each frame's inferred sun, sky (relative to the sky model's) and exposure."""
+    out = []
+    for j, t in enumerate(np.flatnonzero(used)):
+        entry = {"frame": int(t), "time": b.times[t].isoformat()}
+        for v in ("sun", "sky", "exposure"):
+            if v in idata.posterior:
+                entry[v] = posterior_quantiles(idata.posterior[v].values[..., j])
+        if "sky_weight" in idata.posterior:
+            weights = idata.posterior["sky_weight"]
+            entry["sky_weight"] = {
+                str(name): posterior_quantiles(weights.values[..., j, k])
+                for k, name in enumerate(weights["sky_model"].values)
+            }
+        out.append(entry)
+    return out
+
+
+def sky_model_summary(idata) -> dict | None:
+    """The posterior weight of each sky model, averaged over frames, and the
+    one with the most (None with one sky model)."""
+    if "sky_weight" not in idata.posterior:
+        return None
+    weights = idata.posterior["sky_weight"]
+    mean = weights.values.mean(axis=(0, 1, 2))
+    names = [str(x) for x in weights["sky_model"].values]
+    return {
+        "weights": {n: float(m) for n, m in zip(names, mean, strict=True)},
+        "most_weight": names[int(np.argmax(mean))],
+    }
+
+
+def posterior_quantiles(x) -> dict:
+    """Median, 5 and 95 % quantiles, and the 90 % highest-density interval.
+
+    For a gamma at the edge of [0, 1] the equal-tailed interval cannot hold
+    the edge; the highest-density interval can.
+    """
+    az = arviz()
+
+    x = np.asarray(x, float).ravel()
+    q = np.quantile(x, [0.05, 0.5, 0.95])
+    hdi = az.hdi(x, hdi_prob=0.9)
+    return {
+        "median": float(q[1]),
+        "q05": float(q[0]),
+        "q95": float(q[2]),
+        "hdi90": [float(hdi[0]), float(hdi[1])],
+    }

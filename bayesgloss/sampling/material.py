@@ -1,0 +1,445 @@
+"""The one-material sampler: the object's gloss, its facets' albedos and each frame's light.
+
+The object's answer comes from a model in which the object is one material
+(issue "Nobody tells bayesgloss the sky", item 4): every facet has the same
+gamma and exponent n, and its own scale s_f (albedo times the camera's
+units) drawn from one population,
+
+    log s_f ~ N(m, tau^2),   m ~ N(median_f log s0_f, 3^2),   log tau ~ U(log 0.01, log 3),
+
+with each frame's latents (sun, sky, sky shape, exposure) those of
+:mod:`bayesgloss.illumination` (:func:`bayesgloss.illumination.log_prior_material`).
+Facets whose brightness differs for a reason the model does not know (a
+patch of another paint, a shadow the geometry misses) widen tau instead of
+bending gamma. Where the data cannot tell gloss (no direct sun), one albedo
+still lets the sky's uneven brightness over the facets tell it, and if it
+cannot, the posterior of gamma stays the prior's: the object's answer is the
+posterior of one parameter, not a product of facet posteriors that the
+shared frames make dependent (the product read 0.82 [0.71, 0.90] for a true
+0.42 on a simulated overcast day).
+
+:func:`sample_material` is :func:`bayesgloss.sampling.joint.sample_joint`'s
+scheme (Metropolis within Gibbs, E ensembles of W walkers, each walker a
+whole state) with these blocks per sweep:
+
+1. **(gamma, log n) given the rest**: the ensemble moves on the 2-D shared
+   coordinates, each walker's density its own (its scales and frames), every
+   facet's log s carried along its least-squares profile (a shift with unit
+   Jacobian, so the move is exact; without it a change of gamma, which
+   changes every facet's level, was refused and the walkers jammed:
+   acceptance 0.02 on a simulated overcast day);
+2. **sigma given the rest**, drawn and later discarded (partially collapsed
+   Gibbs, as in the joint sampler);
+3. **each facet's log s given sigma, m and tau**: random-walk Metropolis,
+   facets independent, steps from the Fisher information at the data;
+4. **m and log tau given the scales**: exact draws (m normal; tau^-2 a
+   gamma variable truncated to the prior's range);
+5. **the day's sun weights** (clear, dimmed, hidden; Dirichlet(1, 1, 1)):
+   random-walk Metropolis in log-ratio coordinates. One day-level weight
+   for all frames: with each frame's sun clear with a fixed probability
+   0.8, an overcast day (every sun hidden) was so improbable a priori that a
+   mirror-like material, whose sun no facet sees, won: gamma 0.96-1.00 on
+   every overcast day, simulated or rendered;
+6. the frames' latents given sigma, the exposure ridge and the collective
+   moves along adapted directions, as in :mod:`bayesgloss.sampling.joint`;
+7. **the scale ridge**: every log s_f and m - c, every frame's brightness
+   + c (the likelihood and the albedo population unchanged; accepted by the
+   priors of m and of the frames).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy import special
+
+from .. import illumination as il
+from .joint import JointSamples, _JointChain, run_chain, starting_frames
+from .moves import DEFAULT_MOVES, move_named
+
+__all__ = ["sample_material", "starting_material", "facets_given_frames"]
+
+
+class _MaterialChain(_JointChain):
+    """E ensembles of W walkers of the one-material model, and one sweep."""
+
+    def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
+        self.data, self.rng = data, rng
+        self.e, self.w = n_ensembles, n_walkers
+        self.f, self.t = data.shape
+        self.cd = data.curve_data()
+        self.tables = data.tables
+        self.free = data.free
+        lam0 = starting_frames(data)
+        gamma0, log_n0, log_s0 = starting_material(data, lam0)
+        e, f, w = self.e, self.f, self.w
+        dx = data.log_n_grid[1] - data.log_n_grid[0]
+        lo, hi = data.priors.log_n
+        th = np.empty((e, f, w, 3))
+        g = _reflect(gamma0 + 0.02 * rng.standard_normal((e, 1, w)), 0.0, 1.0)
+        n = _reflect(log_n0 + 0.3 * dx * rng.standard_normal((e, 1, w)), lo, hi)
+        th[..., 0], th[..., 1] = g, n
+        th[..., 2] = log_s0[None, :, None] + 0.02 * rng.standard_normal((e, f, w))
+        self.th = th
+        self.lam = lam0 + 0.05 * rng.standard_normal((e, w, *lam0.shape)) * self.free
+        self.hyper = np.zeros((e, w, 4))  # m, log tau, the day's sun weights v1, v2
+        self.hyper[..., 0] = th[..., 2].mean(1)
+        lt = np.log(np.clip(th[..., 2].std(1), 0.02, 2.0))
+        self.hyper[..., 1] = lt
+        self.level = np.zeros((e, w))
+        self._moves = [move_named(name) for name, _ in DEFAULT_MOVES]
+        self._cdf = np.cumsum([x for _, x in DEFAULT_MOVES])
+        self._cdf /= self._cdf[-1]
+        valid = data.valid
+        self.weights = np.where(valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
+        # the Fisher information of log s per unit of (sigma^-2 + 2), at the data
+        self.info_unit = np.sum(np.where(valid, self.weights * data.y**2, 0.0), axis=1)
+        fp = data.frame_priors
+        if data.exposure_known:
+            precision = 1 / il.MATERIAL_M_SD**2 + self.t * (
+                1 / fp.sun_clear_sd**2 + 1 / fp.sky_sd**2
+            )
+        else:
+            precision = 1 / il.MATERIAL_M_SD**2 + self.t / fp.exposure_sd**2
+        self.scale_step = 1.0 / np.sqrt(precision)
+        self.accepted = {"shared": 0.0, "scales": 0.0, "frames": 0.0, "scale": 0.0}
+        self.accepted["collective"] = 0.0
+        self.directions = None
+        self.sweeps = 0
+
+    # -- the blocks --------------------------------------------------------------
+
+    def _profile_log_s(self, th, lam) -> np.ndarray:
+        """Each facet's weighted least-squares log scale at theta's gamma and n
+        and the frames ``lam``, (E, F, H): a function of (gamma, n, lam) only."""
+        unit = th.copy()
+        unit[..., 2] = 0.0
+        mu = il.predict(unit, lam, self.data)
+        w = self.weights[None, :, None, :]
+        y = self.data.y[None, :, None, :]
+        num = np.sum(w * y * mu, -1)
+        den = np.maximum(np.sum(w * mu * mu, -1), 1e-300)
+        return np.log(np.maximum(num, 1e-6 * np.sum(w * np.abs(y) * mu, -1) + 1e-300) / den)
+
+    def _conditional(self, th, hyper, lam) -> np.ndarray:
+        """log p(gamma, n, s | m, tau, frames), sigma integrated out, (E, H)."""
+        lp = il.log_prior_material(th, hyper, self.data)
+        ll = il.log_likelihood_sigma_marginal(th, lam, self.data).sum(1)
+        return np.where(np.isfinite(lp), lp + ll, -np.inf)
+
+    def _shared_step(self) -> None:
+        """The ensemble moves on (gamma, log n), each facet's log s carried
+        along its least-squares profile: s' = s + s^(gamma', n') - s^(gamma,
+        n) (a shift fixed by the two points, so the map has unit Jacobian and
+        reverses itself; in the coordinates (gamma, n, log s - s^) the move is
+        the ensemble's plain move of (gamma, n) given the rest)."""
+        rng, p = self.rng, self.data.priors
+        move = self._moves[int(self._cdf.searchsorted(rng.random(), side="right"))]
+        order = rng.permutation(self.w)
+        halves = (order[: self.w // 2], order[self.w // 2 :])
+        for k in (0, 1):
+            idx, cidx = halves[k], halves[1 - k]
+            lam, hyper = self.lam[:, idx], self.hyper[:, idx]
+            old = self.th[:, :, idx]
+            q, factor = move.propose(old[:, 0, :, :2], self.th[:, 0, cidx, :2], rng, None)
+            inside = (q[..., 0] >= 0) & (q[..., 0] <= 1) & (q[..., 1] >= p.log_n[0])
+            inside &= q[..., 1] <= p.log_n[1]
+            new = old.copy()
+            new[..., 0] = np.clip(q[:, None, :, 0], 0.0, 1.0)
+            new[..., 1] = np.clip(q[:, None, :, 1], *p.log_n)
+            new[..., 2] += self._profile_log_s(new, lam) - self._profile_log_s(old, lam)
+            lp_new = np.where(inside, self._conditional(new, hyper, lam), -np.inf)
+            lp_old = self._conditional(old, hyper, lam)
+            with np.errstate(invalid="ignore"):
+                ok = np.log(rng.random(lp_new.shape)) < factor + lp_new - lp_old
+            self.th[:, :, idx] = np.where(ok[:, None, :, None], new, old)
+            self.accepted["shared"] += ok.mean() / 2
+
+    def _scale_step(self, parts, log_sigma, tries: int = 2) -> None:
+        """Random-walk Metropolis on every facet's log s given sigma, m and
+        tau (facets independent then), proposal sd 2.38 / sqrt(I): I the
+        Fisher information of log s at the data (fixed by sigma and tau)."""
+        rng, data = self.rng, self.data
+        tau = np.exp(self.hyper[..., 1])[:, None, :]  # (E, 1, W)
+        m = self.hyper[..., 0][:, None, :]
+        inv_var = np.exp(-2 * log_sigma)  # (E, F, W)
+        info = (inv_var + 2.0) * self.info_unit[None, :, None] + 1.0 / tau**2
+        step = 2.38 / np.sqrt(info)
+
+        def density(th):
+            z, log_v = il._residuals(il.predict(th, self.lam, data, parts), data)
+            ll = np.sum(-0.5 * z * z, -1) * inv_var - log_v.sum(-1)
+            return ll - 0.5 * ((th[..., 2] - m) / tau) ** 2
+
+        cur = density(self.th)
+        for _ in range(tries):
+            prop = self.th.copy()
+            prop[..., 2] += step * rng.standard_normal(step.shape)
+            new = density(prop)
+            ok = np.log(rng.random(new.shape)) < new - cur
+            self.th[..., 2] = np.where(ok, prop[..., 2], self.th[..., 2])
+            cur = np.where(ok, new, cur)
+            self.accepted["scales"] += ok.mean() / tries
+
+    # -- the sweep -------------------------------------------------------------
+
+    def sweep(self) -> None:
+        data = self.data
+        self._shared_step()
+        parts = il.unit_parts(self.th, data, self.tables)
+        _, q = il.log_likelihood_sigma_marginal(self.th, self.lam, data, parts, with_q=True)
+        log_sigma = self._draw_log_sigma(q)
+        self._scale_step(parts, log_sigma)
+        self._hyper_draw()
+        self._sun_weight_step()
+        self._frame_moves(self.th, parts, log_sigma)
+        if not data.exposure_known:
+            self._exposure_ridge()
+        self._scale_ridge()
+        self.collective_moves()
+        self.sweeps += 1
+
+    def _frame_prior(self, lam, walkers=slice(None), hyper=None):
+        hyper = self.hyper[:, walkers] if hyper is None else hyper
+        return il.log_prior_frames(lam, self.data, il.log_sun_weights(hyper))
+
+    def _sun_weight_step(self, tries: int = 3) -> None:
+        """Random-walk Metropolis on the day's sun weights (v_1, v_2) given the
+        frames' log a (Dirichlet(1, 1, 1) prior in the log-ratio coordinates)."""
+        rng = self.rng
+
+        def density(hyper):
+            return self._frame_prior(self.lam, hyper=hyper).sum(-1) + il.log_sun_weights(hyper).sum(
+                -1
+            )
+
+        cur = density(self.hyper)
+        for _ in range(tries):
+            prop = self.hyper.copy()
+            prop[..., 2:4] += rng.standard_normal(prop[..., 2:4].shape)
+            new = density(prop)
+            ok = np.log(rng.random(new.shape)) < new - cur
+            self.hyper = np.where(ok[..., None], prop, self.hyper)
+            cur = np.where(ok, new, cur)
+
+    def _hyper_draw(self) -> None:
+        """m and log tau from their exact conditionals given the scales (module docstring)."""
+        rng, log_s = self.rng, self.th[..., 2]  # (E, F, W)
+        c0 = il.material_m_center(self.data)
+        tau = np.exp(self.hyper[..., 1])
+        prec = self.f / tau**2 + 1 / il.MATERIAL_M_SD**2
+        mean = (log_s.sum(1) / tau**2 + c0 / il.MATERIAL_M_SD**2) / prec
+        m = mean + rng.standard_normal(mean.shape) / np.sqrt(prec)
+        self.hyper[..., 0] = m
+        ss = np.sum((log_s - m[:, None]) ** 2, axis=1)
+        self.hyper[..., 1] = _draw_log_tau(ss, self.f, rng)
+
+    def _scale_ridge(self, tries: int = 3) -> None:
+        shift = np.zeros(self.data.n_latents)
+        shift[[1, 2] if self.data.exposure_known else [0]] = 1.0
+        c0, sd = il.material_m_center(self.data), il.MATERIAL_M_SD
+        for _ in range(tries):
+            c = self.scale_step * self.rng.standard_normal((self.e, self.w))
+            m = self.hyper[..., 0]
+            lam_new = self.lam + c[:, :, None, None] * shift
+            old = -0.5 * ((m - c0) / sd) ** 2 + self._frame_prior(self.lam).sum(-1)
+            new = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam_new).sum(-1)
+            ok = np.log(self.rng.random(c.shape)) < new - old  # (E, W)
+            self.th[..., 2] -= np.where(ok, c, 0.0)[:, None, :]
+            self.hyper[..., 0] -= np.where(ok, c, 0.0)
+            self.lam = np.where(ok[:, :, None, None], lam_new, self.lam)
+            self.accepted["scale"] += ok.mean() / tries
+
+    # -- collective moves: the whole state as a vector ---------------------------
+
+    def state(self) -> np.ndarray:
+        """Every walker's state, (E, W, D): gamma, log n, each facet's log s,
+        m, log tau, then each frame's free latents."""
+        shared = self.th[:, 0, :, :2]
+        log_s = self.th[..., 2].transpose(0, 2, 1)
+        lam = self.lam[..., self.free].reshape(self.e, self.w, -1)
+        return np.concatenate([shared, log_s, self.hyper, lam], axis=-1)
+
+    def _split(self, x):
+        f = self.f
+        th = np.empty((self.e, f, self.w, 3))
+        th[..., 0] = x[:, None, :, 0]
+        th[..., 1] = x[:, None, :, 1]
+        th[..., 2] = x[..., 2 : 2 + f].transpose(0, 2, 1)
+        nh = self.hyper.shape[-1]
+        hyper = x[..., 2 + f : 2 + f + nh]
+        lam = self.lam.copy()
+        lam[..., self.free] = x[..., 2 + f + nh :].reshape(self.e, self.w, self.t, -1)
+        return th, hyper, lam
+
+    def _full_density(self, th, hyper, lam) -> np.ndarray:
+        """The joint log posterior (sigma integrated out) of every walker, (E, W)."""
+        lp = il.log_prior_material(th, hyper, self.data)
+        ll = il.log_likelihood_sigma_marginal(
+            np.where(np.isfinite(lp)[:, None, :, None], th, self.th), lam, self.data
+        ).sum(1)
+        frames = self._frame_prior(lam, hyper=hyper).sum(-1)
+        return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
+
+    def _blocks(self) -> list[slice]:
+        f, k = self.f, int(self.free.sum())
+        blocks = [slice(0, 2)] + [slice(2 + i, 3 + i) for i in range(f)]
+        nh = self.hyper.shape[-1]
+        blocks += [slice(2 + f, 4 + f), slice(4 + f, 2 + f + nh)]
+        o = 2 + f + nh
+        blocks += [slice(o + k * i, o + k * (i + 1)) for i in range(self.t)]
+        return blocks
+
+    def collective_moves(self) -> None:
+        if self.directions is None:
+            return
+        x = self.state()
+        cur = self._full_density(self.th, self.hyper, self.lam)
+        for v in self.directions:
+            z = self.rng.standard_normal((self.e, self.w, 1)) * (
+                1.0 if self.rng.random() < 0.7 else 0.3
+            )
+            prop = x + z * v
+            new = self._full_density(*self._split(prop))
+            ok = np.log(self.rng.random(new.shape)) < new - cur
+            x = np.where(ok[..., None], prop, x)
+            cur = np.where(ok, new, cur)
+            self.accepted["collective"] += ok.mean() / len(self.directions)
+        self.th, self.hyper, self.lam = self._split(x)
+
+
+def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
+    """log tau given the scales' sum of squares about m, (E, W): tau^-2 ~
+    Gamma(F / 2, rate SS / 2) truncated to the prior's range (log tau uniform)."""
+    lo, hi = il.MATERIAL_LOG_TAU
+    k = 0.5 * f
+    rate = np.maximum(0.5 * ss, 1e-300)
+    x_lo, x_hi = np.exp(-2 * hi), np.exp(-2 * lo)  # tau^-2 between
+    c_lo, c_hi = special.gammainc(k, rate * x_lo), special.gammainc(k, rate * x_hi)
+    u = c_lo + (c_hi - c_lo) * rng.random(ss.shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x = special.gammaincinv(k, u) / rate
+        log_tau = -0.5 * np.log(x)
+    # the truncation's mass underflows when the scales are far tighter (or
+    # wider) than the prior's range allows: tau at the bound nearest its mode
+    mode = 0.5 * np.log(np.maximum(ss, 1e-300) / max(f, 1))
+    edge = np.where(mode < lo, lo, hi)
+    bad = ~np.isfinite(log_tau) | (c_hi - c_lo <= 0)
+    return np.clip(np.where(bad, edge, log_tau), lo, hi)
+
+
+def _reflect(x, lo, hi):
+    width = hi - lo
+    u = np.mod(x - lo, 2.0 * width)
+    u = np.where(u > width, 2.0 * width - u, u)
+    return lo + np.clip(u, 1e-9 * width, (1 - 1e-9) * width)
+
+
+def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray]:
+    """One material's best (gamma, log n) on a grid given the frames ``lam``
+    (T, L), and each facet's log s at it, (F,): weighted least squares of
+    every facet's scale at each (gamma, exponent node), the pair with the
+    smallest total weighted residual kept."""
+    f, t = data.shape
+    n = len(data.log_n_grid)
+    gam = np.linspace(0.0, 1.0, 41)
+    th = np.zeros((1, f, n, 3))
+    th[..., 1] = data.log_n_grid[None, None, :]
+    mus = []
+    for g in (0.0, 1.0):
+        th[..., 0] = g
+        mus.append(il.predict(th, lam[None, None].repeat(n, 1), data)[0])  # (F, N, T)
+    w = np.where(data.valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
+    best, best_r = (0.5, data.log_n_grid[n // 2], data.log_s_center.copy()), np.inf
+    for g in gam:
+        mu = (1 - g) * mus[0] + g * mus[1]  # (F, N, T)
+        num = np.sum(w[:, None] * data.y[:, None] * mu, -1)
+        den = np.maximum(np.sum(w[:, None] * mu * mu, -1), 1e-300)
+        s = np.maximum(num / den, 1e-300)
+        r = np.sum(w[:, None] * (data.y[:, None] - s[..., None] * mu) ** 2, -1).sum(0)  # (N,)
+        j = int(np.argmin(r))
+        if r[j] < best_r:
+            best_r = r[j]
+            best = (float(g), float(data.log_n_grid[j]), np.log(s[:, j]))
+    g, log_n, log_s = best
+    return min(max(g, 0.01), 0.99), log_n, log_s
+
+
+def sample_material(
+    data: il.JointData,
+    *,
+    n_ensembles: int = 4,
+    n_walkers: int = 16,
+    chunk: int = 200,
+    min_sweeps: int = 800,
+    max_sweeps: int = 8000,
+    draws_per_ensemble: int = 1000,
+    seed: int | None = 0,
+    progress=None,
+) -> JointSamples:
+    """Sample the one-material model (module docstring).
+
+    Parameters as :func:`bayesgloss.sampling.sample_joint`.
+
+    Returns
+    -------
+    JointSamples
+        ``draws`` (F, E, S, 4) with every facet's gamma and log n the shared
+        ones; ``material`` (E, S, 2): m and log tau; diagnostics of gamma
+        (first) and of every frame's log a and log b.
+    """
+    if n_walkers < 6 or n_walkers % 2:
+        raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    chain = _MaterialChain(data, n_ensembles, n_walkers, rng)
+    return run_chain(chain, rng, chunk, min_sweeps, max_sweeps, draws_per_ensemble, progress, t0, 1)
+
+
+def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: int = 0, **options):
+    """Each facet's own (gamma, log n, log s, log sigma) given the object's
+    illumination, (F, E, S, 4), for the one-material model's frame draws
+    ``frames`` (E, S, T, L).
+
+    The per-facet answers beside the object's: every facet sampled alone
+    (its own gamma, n and scale, :func:`bayesgloss.sampling.sample_posterior`)
+    with the frames fixed at ``copies`` draws of each ensemble of the
+    object's posterior, the copies' draws pooled (multiple imputation: the
+    facet's posterior averaged over the illumination's, which the one
+    material decided; a facet's departure from the material does not feed
+    back into the light). Chain e of the result pools the copies from
+    ensemble e, so R-hat across chains sees the illumination's spread too.
+    ``options`` go to :func:`~bayesgloss.sampling.sample_posterior`.
+
+    Returns
+    -------
+    draws : ndarray (F, E, S, 4)
+    samples : bayesgloss.sampling.PosteriorSamples
+        The facet sampler's run over the E ``copies`` F facet copies.
+    """
+    from .joint import _curve_data_at
+    from .posterior import sample_posterior
+
+    e, s = frames.shape[:2]
+    f = data.shape[0]
+    picks = np.linspace(0, s - 1, copies + 2)[1:-1].round().astype(int)
+    parts = [_curve_data_at(data, frames[i, j]) for i in range(e) for j in picks]
+    first = parts[0]
+    stacked = type(first)(
+        np.concatenate([p.y for p in parts]),
+        np.concatenate([p.valid for p in parts]),
+        np.concatenate([p.censored for p in parts]),
+        np.concatenate([p.diffuse for p in parts]),
+        np.concatenate([p.glossy for p in parts]),
+        first.log_n_grid,
+        np.concatenate([p.log_s_center for p in parts]),
+        priors=first.priors,
+    )
+    out = sample_posterior(stacked, seed=seed, **options)
+    draws = out.draws  # (E copies F, E', S', 4)
+    draws = draws.reshape(e, copies, f, -1, draws.shape[-1])  # (E, copies, F, E' S', 4)
+    pooled = draws.transpose(2, 0, 1, 3, 4).reshape(f, e, -1, draws.shape[-1])
+    rng = np.random.default_rng(seed)
+    take = np.sort(rng.choice(pooled.shape[2], size=s, replace=pooled.shape[2] < s))
+    return pooled[:, :, take], out
