@@ -333,6 +333,12 @@ class JointData:
         return np.ascontiguousarray(rows.reshape(-1, 2 * self.sources, g.shape[-1]))
 
     @functools.cached_property
+    def relative_weights(self) -> np.ndarray:
+        """Least-squares weights of relative noise at the data, 1 / (|y| + c)^2,
+        0 where invalid, (F, T) (for starts and proposal scales)."""
+        return np.where(self.valid, 1.0 / (np.abs(self.y) + self.floor[:, None]) ** 2, 0.0)
+
+    @functools.cached_property
     def sigma_constants(self):
         """k = T_f / 2, the constant of the sigma-marginal likelihood, and the
         tail cuts of :func:`bayesgloss.gamma_interval.log_gamma_interval`, (F,) each."""

@@ -124,8 +124,6 @@ def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options,
     }
     if data.log_exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
-    if fd.shape[1] != th.shape[2]:  # the facets' draws on their own axis
-        raise RuntimeError("facet draws and object draws differ in number")
     dims = {
         **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
         **{v: ["frame"] for v in ("sun", "sky", "exposure")},

@@ -573,7 +573,7 @@ def object_posterior(result, seed: int) -> tuple[np.ndarray, bool]:
         mu = pooling.population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)["mu"]
     q = np.quantile(mu, [0.05, 0.5, 0.95])
     want = [summary["q05"], summary["median"], summary["q95"]]
-    return mu, bool(np.allclose(q, want, rtol=0, atol=1e-9))
+    return mu, bool(np.allclose(q, want, rtol=0, atol=1e-12))
 
 
 def facet_records(result, sim_out: dict, truth: float) -> list[dict]:

@@ -170,3 +170,20 @@ def _encode_codes(value, encoding, response_gamma):
     elif name != "linear":
         raise ValueError(f"integer frames cannot have pixel encoding {encoding!r}")
     return v
+
+
+@pytest.fixture(scope="session")
+def paper_three_skies():
+    """Split bases of the paper scene (SW) under gensky's clear, intermediate and
+    overcast skies (the ``auto`` mixture), sun-up frames."""
+    from bayesgloss import illumination as il
+    from bayesgloss import scene, sky
+
+    seq = scene.paper_sequence(view="SW")
+    g = scene.seen_geometry(seq)
+    up = seq.sky.sun_direction[:, 2] > 0.02
+    others = [
+        sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
+        for name in ("gensky-intermediate", "gensky-overcast")
+    ]
+    return il.illumination_bases(g, seq.sky, others=others), up

@@ -110,22 +110,6 @@ def test_known_exposure_is_fixed_and_unknown_is_inferred(paper_split):
         il.joint_data(y, np.ones((6, t), bool), bases, exposure=-np.ones(t))
 
 
-@pytest.fixture(scope="module")
-def paper_three_skies():
-    """Split bases of the paper scene (SW) under gensky's clear, intermediate and
-    overcast skies (the ``auto`` mixture), sun-up frames."""
-    from bayesgloss import sky
-
-    seq = scene.paper_sequence(view="SW")
-    g = scene.seen_geometry(seq)
-    up = seq.sky.sun_direction[:, 2] > 0.02
-    others = [
-        sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
-        for name in ("gensky-intermediate", "gensky-overcast")
-    ]
-    return il.illumination_bases(g, seq.sky, others=others), up
-
-
 def test_sky_model_weights_are_uniform_on_the_simplex_a_priori(paper_three_skies):
     # with no usable observation the joint sampler must draw the prior: each
     # frame's three sky-model weights Dirichlet(1, 1, 1), so each weight has

@@ -2,27 +2,11 @@
 sampler (bayesgloss.sampling.material)."""
 
 import numpy as np
-import pytest
 from scipy import stats
 
 from bayesgloss import illumination as il
-from bayesgloss import scene, sky
 from bayesgloss.sampling import material as mat
 from bayesgloss.sampling import sample_material
-
-
-@pytest.fixture(scope="module")
-def paper_three_skies():
-    """Split bases of the paper scene (SW) under the ``auto`` mixture of gensky's
-    clear, intermediate and overcast skies, sun-up frames."""
-    seq = scene.paper_sequence(view="SW")
-    g = scene.seen_geometry(seq)
-    up = seq.sky.sun_direction[:, 2] > 0.02
-    others = [
-        sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
-        for name in ("gensky-intermediate", "gensky-overcast")
-    ]
-    return il.illumination_bases(g, seq.sky, others=others), up
 
 
 def test_albedo_spread_draw_is_its_conditional():

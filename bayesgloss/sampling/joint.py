@@ -105,18 +105,12 @@ class _JointChain:
     """The state of E ensembles of W walkers and one sweep of the moves."""
 
     def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
-        self.data, self.rng = data, rng
-        self.e, self.w = n_ensembles, n_walkers
-        self.f, self.t = data.shape
-        self.cd = data.curve_data()
-        self.tables = data.tables
+        self._setup(data, n_ensembles, n_walkers, rng)
         lam0 = starting_frames(data)  # (T, L)
         start = initial_ensemble(
             _curve_data_at(data, lam0).take(np.tile(np.arange(self.f), self.e)), n_walkers, rng
         )
         self.th = np.ascontiguousarray(start[..., :3]).reshape(self.e, self.f, self.w, 3)
-        self.level = np.zeros((self.e, self.w))
-        self.free = data.free
         self.lam = lam0 + 0.05 * rng.standard_normal((self.e, self.w, *lam0.shape)) * self.free
         self.ensemble = BatchedEnsemble(self._log_prob, DEFAULT_MOVES, rng, pass_walkers=True)
         self.log_p = self._log_prob(self._coords(), np.arange(self.w))
@@ -128,6 +122,16 @@ class _JointChain:
             precision = self.f / q**2 + self.t / fp.exposure_sd**2
         self.scale_step = 1.0 / np.sqrt(precision)
         self.accepted = {"facets": 0.0, "frames": 0.0, "scale": 0.0, "collective": 0.0}
+
+    def _setup(self, data: il.JointData, n_ensembles, n_walkers, rng) -> None:
+        """What every chain of this scheme holds besides its state."""
+        self.data, self.rng = data, rng
+        self.e, self.w = n_ensembles, n_walkers
+        self.f, self.t = data.shape
+        self.cd = data.curve_data()
+        self.tables = data.tables
+        self.free = data.free
+        self.level = np.zeros((self.e, self.w))
         self.directions = None
         self.sweeps = 0
 
@@ -307,19 +311,25 @@ class _JointChain:
         if self.directions is None:
             return
         x = self.state()
-        cur = self._full_density(self.th, self.lam)
+        cur = self._full_density(*self._parts())
         for v in self.directions:
             z = self.rng.standard_normal((self.e, self.w, 1)) * (
                 1.0 if self.rng.random() < 0.7 else 0.3
             )
             prop = x + z * v
-            th, lam = self._split(prop)
-            new = self._full_density(th, lam)
+            new = self._full_density(*self._split(prop))
             ok = np.log(self.rng.random(new.shape)) < new - cur
             x = np.where(ok[..., None], prop, x)
             cur = np.where(ok, new, cur)
             self.accepted["collective"] += ok.mean() / len(self.directions)
-        self.th, self.lam = self._split(x)
+        self._assign(self._split(x))
+
+    def _parts(self) -> tuple:
+        """The state's parts as :meth:`_split` gives them: (th, lam)."""
+        return self.th, self.lam
+
+    def _assign(self, parts) -> None:
+        self.th, self.lam = parts
 
     def _exposure_ridge(self) -> None:
         c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
@@ -429,8 +439,7 @@ def _alternating_fit(data: il.JointData, shape, log_sun, rounds):
         lam[:, 2 + shape] = 6.0  # w ~ 1 on that shape
     elif shape == 0:
         lam[:, 3:] = -6.0
-    w = np.where(data.valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
-    sw = np.sqrt(w)
+    sw = np.sqrt(data.relative_weights)
     rms = np.inf
     for _ in range(rounds):
         cd = _curve_data_at(data, lam)
@@ -507,32 +516,45 @@ def sample_joint(
     -------
     JointSamples
     """
-    if n_walkers < 6 or n_walkers % 2:
-        raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
-    rng = np.random.default_rng(seed)
-    t0 = time.perf_counter()
-    chain = _JointChain(data, n_ensembles, n_walkers, rng)
-    return run_chain(chain, rng, chunk, min_sweeps, max_sweeps, draws_per_ensemble, progress, t0)
+    return run_chain(
+        _JointChain,
+        data,
+        n_ensembles=n_ensembles,
+        n_walkers=n_walkers,
+        chunk=chunk,
+        min_sweeps=min_sweeps,
+        max_sweeps=max_sweeps,
+        draws_per_ensemble=draws_per_ensemble,
+        seed=seed,
+        progress=progress,
+    )
 
 
 def run_chain(
-    chain: _JointChain,
-    rng,
+    chain_class,
+    data: il.JointData,
+    *,
+    n_ensembles: int,
+    n_walkers: int,
     chunk: int,
     min_sweeps: int,
     max_sweeps: int,
     draws_per_ensemble: int,
+    seed: int | None,
     progress,
-    t0: float,
     diagnosed_facets: int | None = None,
 ) -> JointSamples:
-    """Burn-in (adapting the collective directions), then sweeps in chunks
+    """Run a chain of ``chain_class`` (:class:`_JointChain` or a subclass):
+    burn-in (adapting the collective directions), then sweeps in chunks
     until converged or ``max_sweeps``; the kept second half thinned to
     :class:`JointSamples` (``material`` from the chain's ``hyper``, if any).
     ``diagnosed_facets``: the facets whose gamma the rule checks (None: all;
     1 where gamma is shared)."""
-    data = chain.data
-    n_walkers, n_ensembles = chain.w, chain.e
+    if n_walkers < 6 or n_walkers % 2:
+        raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    chain = chain_class(data, n_ensembles, n_walkers, rng)
     for length in BURN_ROUNDS:
         states = []
         for _ in range(length):

@@ -49,14 +49,14 @@ whole state) with these blocks per sweep:
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy import special
 
 from .. import illumination as il
-from .joint import JointSamples, _JointChain, run_chain, starting_frames
+from .joint import JointSamples, _curve_data_at, _JointChain, run_chain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
+from .posterior import sample_posterior
+from .starts import _reflect
 
 __all__ = ["sample_material", "starting_material", "facets_given_frames"]
 
@@ -65,12 +65,7 @@ class _MaterialChain(_JointChain):
     """E ensembles of W walkers of the one-material model, and one sweep."""
 
     def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
-        self.data, self.rng = data, rng
-        self.e, self.w = n_ensembles, n_walkers
-        self.f, self.t = data.shape
-        self.cd = data.curve_data()
-        self.tables = data.tables
-        self.free = data.free
+        self._setup(data, n_ensembles, n_walkers, rng)
         lam0 = starting_frames(data)
         gamma0, log_n0, log_s0 = starting_material(data, lam0)
         e, f, w = self.e, self.f, self.w
@@ -87,14 +82,11 @@ class _MaterialChain(_JointChain):
         self.hyper[..., 0] = th[..., 2].mean(1)
         lt = np.log(np.clip(th[..., 2].std(1), 0.02, 2.0))
         self.hyper[..., 1] = lt
-        self.level = np.zeros((e, w))
         self._moves = [move_named(name) for name, _ in DEFAULT_MOVES]
         self._cdf = np.cumsum([x for _, x in DEFAULT_MOVES])
         self._cdf /= self._cdf[-1]
-        valid = data.valid
-        self.weights = np.where(valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
         # the Fisher information of log s per unit of (sigma^-2 + 2), at the data
-        self.info_unit = np.sum(np.where(valid, self.weights * data.y**2, 0.0), axis=1)
+        self.info_unit = np.sum(np.where(data.valid, data.relative_weights * data.y**2, 0.0), 1)
         fp = data.frame_priors
         if data.exposure_known:
             precision = 1 / il.MATERIAL_M_SD**2 + self.t * (
@@ -105,8 +97,6 @@ class _MaterialChain(_JointChain):
         self.scale_step = 1.0 / np.sqrt(precision)
         self.accepted = {"shared": 0.0, "scales": 0.0, "frames": 0.0, "scale": 0.0}
         self.accepted["collective"] = 0.0
-        self.directions = None
-        self.sweeps = 0
 
     # -- the blocks --------------------------------------------------------------
 
@@ -116,7 +106,7 @@ class _MaterialChain(_JointChain):
         unit = th.copy()
         unit[..., 2] = 0.0
         mu = il.predict(unit, lam, self.data)
-        w = self.weights[None, :, None, :]
+        w = self.data.relative_weights[None, :, None, :]
         y = self.data.y[None, :, None, :]
         num = np.sum(w * y * mu, -1)
         den = np.maximum(np.sum(w * mu * mu, -1), 1e-300)
@@ -291,22 +281,11 @@ class _MaterialChain(_JointChain):
         blocks += [slice(o + k * i, o + k * (i + 1)) for i in range(self.t)]
         return blocks
 
-    def collective_moves(self) -> None:
-        if self.directions is None:
-            return
-        x = self.state()
-        cur = self._full_density(self.th, self.hyper, self.lam)
-        for v in self.directions:
-            z = self.rng.standard_normal((self.e, self.w, 1)) * (
-                1.0 if self.rng.random() < 0.7 else 0.3
-            )
-            prop = x + z * v
-            new = self._full_density(*self._split(prop))
-            ok = np.log(self.rng.random(new.shape)) < new - cur
-            x = np.where(ok[..., None], prop, x)
-            cur = np.where(ok, new, cur)
-            self.accepted["collective"] += ok.mean() / len(self.directions)
-        self.th, self.hyper, self.lam = self._split(x)
+    def _parts(self) -> tuple:
+        return self.th, self.hyper, self.lam
+
+    def _assign(self, parts) -> None:
+        self.th, self.hyper, self.lam = parts
 
 
 def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
@@ -329,13 +308,6 @@ def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
     return np.clip(np.where(bad, edge, log_tau), lo, hi)
 
 
-def _reflect(x, lo, hi):
-    width = hi - lo
-    u = np.mod(x - lo, 2.0 * width)
-    u = np.where(u > width, 2.0 * width - u, u)
-    return lo + np.clip(u, 1e-9 * width, (1 - 1e-9) * width)
-
-
 def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray]:
     """One material's best (gamma, log n) on a grid given the frames ``lam``
     (T, L), and each facet's log s at it, (F,): weighted least squares of
@@ -350,7 +322,7 @@ def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray
     for g in (0.0, 1.0):
         th[..., 0] = g
         mus.append(il.predict(th, lam[None, None].repeat(n, 1), data)[0])  # (F, N, T)
-    w = np.where(data.valid, 1.0 / (np.abs(data.y) + data.floor[:, None]) ** 2, 0.0)
+    w = data.relative_weights
     best, best_r = (0.5, data.log_n_grid[n // 2], data.log_s_center.copy()), np.inf
     for g in gam:
         mu = (1 - g) * mus[0] + g * mus[1]  # (F, N, T)
@@ -389,12 +361,19 @@ def sample_material(
         ones; ``material`` (E, S, 2): m and log tau; diagnostics of gamma
         (first) and of every frame's log a and log b.
     """
-    if n_walkers < 6 or n_walkers % 2:
-        raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
-    rng = np.random.default_rng(seed)
-    t0 = time.perf_counter()
-    chain = _MaterialChain(data, n_ensembles, n_walkers, rng)
-    return run_chain(chain, rng, chunk, min_sweeps, max_sweeps, draws_per_ensemble, progress, t0, 1)
+    return run_chain(
+        _MaterialChain,
+        data,
+        n_ensembles=n_ensembles,
+        n_walkers=n_walkers,
+        chunk=chunk,
+        min_sweeps=min_sweeps,
+        max_sweeps=max_sweeps,
+        draws_per_ensemble=draws_per_ensemble,
+        seed=seed,
+        progress=progress,
+        diagnosed_facets=1,
+    )
 
 
 def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: int = 0, **options):
@@ -418,9 +397,6 @@ def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: in
     samples : bayesgloss.sampling.PosteriorSamples
         The facet sampler's run over the E ``copies`` F facet copies.
     """
-    from .joint import _curve_data_at
-    from .posterior import sample_posterior
-
     e, s = frames.shape[:2]
     f = data.shape[0]
     picks = np.linspace(0, s - 1, copies + 2)[1:-1].round().astype(int)
