@@ -154,6 +154,15 @@ FORMAT = "bayesgloss-sequence/1"
 #: File names inside a bundle.
 MANIFEST = "sequence.json"
 LABELS = "facets.png"
+#: The largest label image (and so frame) read, in pixels: a header declaring
+#: more is rejected before any pixel is decoded (a 389 KB PNG declaring 20000 x
+#: 20000 pixels took 4 GB).
+MAX_IMAGE_PIXELS = 100_000_000
+#: Site elevations read, metres: the Dead Sea's shore to above Everest (the
+#: sun's position model's pressure has no meaning far outside).
+SITE_ELEVATION = (-500.0, 9000.0)
+#: File name endings of ``object_mesh``.
+MESH_SUFFIXES = (".obj", ".ply")
 #: Facets with fewer labelled pixels are reported as ``too-few-pixels``.
 MIN_PIXELS = 4
 #: Reasons an observation is left out, in the order of :attr:`FacetCurves.flag_bits`.
@@ -268,10 +277,24 @@ class _Manifest(NamedTuple):
     truth: dict | None
     exposure: np.ndarray | None
     irradiance: np.ndarray
+    object_mesh: str | None = None
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr of a manifest value for an error line, cut at ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    """A finite JSON number (an integer too large for a float, as ``1e400``
+    written without its point, is not one)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 class _Checker:
@@ -292,17 +315,17 @@ class _Checker:
         value = obj[key]
         if kind is float:
             if not _is_number(value):
-                raise self.fail(name, f"must be a finite number, got {value!r}")
+                raise self.fail(name, f"must be a finite number, got {_short(value)}")
             return float(value)
         if kind is int:
             if isinstance(value, bool) or not (
                 isinstance(value, int) or (isinstance(value, float) and value.is_integer())
             ):
-                raise self.fail(name, f"must be an integer, got {value!r}")
+                raise self.fail(name, f"must be an integer, got {_short(value)}")
             return int(value)
         names = {dict: "an object", list: "a list", str: "a string"}
         if not isinstance(value, kind):
-            raise self.fail(name, f"must be {names[kind]}, got {value!r}")
+            raise self.fail(name, f"must be {names[kind]}, got {_short(value)}")
         return value
 
     def vector(self, obj: Mapping, key: str, where: str) -> np.ndarray:
@@ -363,6 +386,12 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     if not -180.0 <= longitude <= 180.0:
         raise check.fail("site.longitude", f"longitude {longitude} lies outside [-180, 180]")
     elevation = check.get(site, "elevation", "site", float, required=False)
+    low, high = SITE_ELEVATION
+    if elevation is not None and not low <= elevation <= high:
+        raise check.fail(
+            "site.elevation",
+            f"{elevation:g} m lies outside [{low:g}, {high:g}] m (metres above sea level)",
+        )
     site = Site(latitude, longitude, 0.0 if elevation is None else elevation)
 
     camera = check.get(manifest, "camera", "", dict)
@@ -433,6 +462,14 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     facets = Facets(np.array(ids, dtype=int), np.array(normals), np.array(centers))
 
     truth = check.get(manifest, "truth", "", dict, required=False)
+    mesh = check.get(manifest, "object_mesh", "", str, required=False)
+    if mesh is not None:
+        if not mesh or Path(mesh).is_absolute():
+            raise check.fail("object_mesh", f"must be a path relative to the bundle, got {mesh!r}")
+        if Path(mesh).suffix.lower() not in MESH_SUFFIXES:
+            raise check.fail(
+                "object_mesh", f"must name an OBJ or PLY file (.obj, .ply), got {mesh!r}"
+            )
     return _Manifest(
         site,
         position,
@@ -445,7 +482,24 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         truth,
         np.array(exposures, dtype=float) if all(given) else None,
         np.array(irradiance, dtype=float).reshape(-1, 3),
+        mesh,
     )
+
+
+def _inside_bundle(check: _Checker, root: Path, name: str, field: str) -> Path:
+    """``root / name``, or a BundleError naming ``field`` if it lies outside
+    the bundle folder once resolved (a ``..`` or a symbolic link out of it):
+    no file outside the bundle is opened, nor its bytes echoed."""
+    path = root / name
+    try:
+        inside = path.resolve().is_relative_to(root.resolve())
+    except (OSError, RuntimeError) as err:  # a link loop, say
+        raise check.fail(field, f"cannot resolve '{name}': {err}") from None
+    if not inside:
+        raise check.fail(
+            field, f"'{name}' lies outside the bundle folder (a '..' or a link out of it)"
+        )
+    return path
 
 
 def _check_camera(check: _Checker, position: np.ndarray, facets: Facets) -> None:
@@ -641,6 +695,8 @@ class Bundle:
 
 
 def _size(shape) -> str:
+    if len(shape) < 2:  # a damaged file decoded to no image
+        return f"an array of shape {tuple(shape)}, not an image"
     return f"{shape[1]}x{shape[0]} pixels"
 
 
@@ -698,12 +754,22 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
     parsed = _parse_manifest(manifest, path)
 
     # label image
-    labels_path = root / LABELS
+    labels_path = _inside_bundle(check, root, LABELS, LABELS)
     if not labels_path.is_file():
         raise check.fail(LABELS, f"missing label image '{labels_path}'")
     try:
         if image_kind(labels_path) != "png":
             raise ValueError("not a PNG file")
+        info = image_info(labels_path)
+    except Exception as err:
+        raise check.fail(LABELS, f"cannot read the label image: {err}") from None
+    if info.height * info.width > MAX_IMAGE_PIXELS:
+        raise check.fail(
+            LABELS,
+            f"declares {info.width} x {info.height} pixels, more than the "
+            f"{MAX_IMAGE_PIXELS} this reader decodes",
+        )
+    try:
         labels = read_labels(labels_path)
     except Exception as err:
         raise check.fail(LABELS, f"cannot read the label image: {err}") from None
@@ -732,8 +798,8 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
     # frames: presence, size and sample type from the headers
     files = []
     for i, name in enumerate(parsed.frame_files):
-        file = root / name
         where = f"frames[{i}].file"
+        file = _inside_bundle(check, root, name, where)
         if not file.is_file():
             raise check.fail(where, f"missing frame '{name}'")
         try:
@@ -766,6 +832,16 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
                 "Radiance, float TIFF or EXR; use 'linear' for integer linear images)",
             )
         files.append(file)
+    if parsed.object_mesh is not None:
+        mesh = _inside_bundle(check, root, parsed.object_mesh, "object_mesh")
+        if not mesh.is_file():
+            raise check.fail("object_mesh", f"missing mesh '{parsed.object_mesh}'")
+        warnings.warn(
+            f"bundle '{path}': object_mesh '{parsed.object_mesh}' is not used yet; "
+            "the object is taken as convex and alone on the ground",
+            BundleWarning,
+            stacklevel=2,
+        )
     same_time = _same_time_warning(path, parsed.times)
     if same_time:
         warnings.warn(same_time, BundleWarning, stacklevel=2)

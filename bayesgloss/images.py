@@ -11,6 +11,8 @@ byte of 16-bit RGB), TIFF through tifffile, OpenEXR through the optional
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import os
 import struct
@@ -453,11 +455,24 @@ def write_png(path: str | os.PathLike, pixels: np.ndarray) -> None:
         writer.write(f, arr.reshape(height, -1))
 
 
+@contextlib.contextmanager
+def _quiet_tifffile():
+    """tifffile's own log lines about a damaged file silenced while it is
+    read: the reader's one error names the file and the problem."""
+    log = logging.getLogger("tifffile")
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 def read_tiff(path: str | os.PathLike) -> np.ndarray:
     """First image of a TIFF file, shape (H, W) or (H, W, C), as stored (tifffile)."""
     import tifffile
 
-    with tifffile.TiffFile(os.fspath(path)) as tif:
+    with _quiet_tifffile(), tifffile.TiffFile(os.fspath(path)) as tif:
         page = tif.pages[0]
         arr = page.asarray()
         if arr.ndim == 3 and page.planarconfig == tifffile.PLANARCONFIG.SEPARATE:
@@ -554,7 +569,7 @@ def image_info(path: str | os.PathLike) -> ImageInfo:
     if kind == "tiff":
         import tifffile
 
-        with tifffile.TiffFile(os.fspath(path)) as tif:
+        with _quiet_tifffile(), tifffile.TiffFile(os.fspath(path)) as tif:
             page = tif.pages[0]
             return ImageInfo(
                 int(page.imagelength),

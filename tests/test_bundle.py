@@ -1381,3 +1381,239 @@ def test_frame_exposure_is_read_and_checked(tmp_path):
     )
     with pytest.raises(bd.BundleError, match=r"frames\[1\]\.exposure.*every frame"):
         bd.read_bundle(path)
+
+
+# ---------------------------------------------------------------------------
+# nothing read from outside the bundle, nothing decoded past a size cap
+# (issue "Nothing read or written where it should not be")
+# ---------------------------------------------------------------------------
+
+
+def test_frame_path_leaving_the_bundle_is_rejected_unread(tmp_path):
+    # a frame named '../x.tiff' that exists outside the bundle (a valid frame
+    # of the right size: today's reader would use it) is rejected by field,
+    # and a frame naming a file far outside is never opened nor echoed
+    path, _ = _write(tmp_path)
+    outside = tmp_path / "outside.tiff"
+    outside.write_bytes((Path(path) / "frames" / "f000.tif").read_bytes())
+    _edit_manifest(path, lambda m: m["frames"][0].update(file="../outside.tiff"))
+    with pytest.raises(bd.BundleError, match=r"frames\[0\]\.file.*outside the bundle"):
+        bd.read_bundle(path)
+    _edit_manifest(path, lambda m: m["frames"][1].update(file="../../../../../../etc/passwd"))
+    _edit_manifest(path, lambda m: m["frames"][0].update(file="frames/f000.tif"))
+    with pytest.raises(bd.BundleError) as err:
+        bd.read_bundle(path)
+    assert "frames[1].file" in str(err.value) and "root:" not in str(err.value)
+
+
+def test_symbolic_links_out_of_the_bundle_are_rejected(tmp_path):
+    path, _ = _write(tmp_path)
+    frame = Path(path) / "frames" / "f002.tif"
+    outside = tmp_path / "elsewhere.tiff"
+    outside.write_bytes(frame.read_bytes())
+    frame.unlink()
+    frame.symlink_to(outside)
+    with pytest.raises(bd.BundleError, match=r"frames\[2\]\.file.*outside the bundle"):
+        bd.read_bundle(path)
+    frame.unlink()
+    frame.write_bytes(outside.read_bytes())
+    bd.read_bundle(path)  # a link inside the bundle is fine; so is the file back
+    labels = Path(path) / bd.LABELS
+    moved = tmp_path / "labels-elsewhere.png"
+    labels.rename(moved)
+    labels.symlink_to(moved)
+    with pytest.raises(bd.BundleError, match=r"facets\.png.*outside the bundle"):
+        bd.read_bundle(path)
+
+
+def test_label_image_declaring_a_huge_size_is_rejected_before_decoding(tmp_path):
+    # a PNG header declaring 20000 x 20000 pixels over a few bytes of data:
+    # rejected from the header (the reader once took 4 GB decoding it)
+    path, _ = _write(tmp_path)
+    labels = Path(path) / bd.LABELS
+    raw = labels.read_bytes()
+    header = bytearray(raw[:33])
+    header[16:24] = struct.pack(">II", 20000, 20000)
+    header[29:33] = struct.pack(">I", zlib.crc32(bytes(header[12:29])) & 0xFFFFFFFF)
+    labels.write_bytes(bytes(header) + raw[33:])
+    with pytest.raises(bd.BundleError, match=r"facets\.png.*20000 x 20000"):
+        bd.read_bundle(path)
+
+
+def test_object_mesh_is_checked_and_said_unused(tmp_path):
+    path, _ = _write(tmp_path)
+    for value, problem in (
+        (3, "object_mesh"),
+        ("/etc/mesh.obj", "relative to the bundle"),
+        ("mesh.stl", "OBJ or PLY"),
+        ("../mesh.obj", "outside the bundle"),
+        ("mesh.obj", "missing mesh"),
+    ):
+        (tmp_path / "mesh.obj").write_text("v 0 0 0\n")
+        _edit_manifest(path, lambda m, v=value: m.update(object_mesh=v))
+        with pytest.raises(bd.BundleError, match=problem):
+            bd.read_bundle(path)
+    (Path(path) / "mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.warns(bd.BundleWarning, match="object_mesh 'mesh.obj' is not used yet"):
+        bd.read_bundle(path)
+
+
+# the reader under 1000 mutated bundles: run in a child process so that its
+# peak memory is its own (the test's process has held far more by then)
+
+_FUZZ_VALUES = (
+    None, True, -1, 0, 0.5, 1e308, -1e308, 10**400, float("nan"), float("inf"), "", "x",
+    "../decoy.tif", "../../../../../../etc/passwd", "/etc/passwd", "frames/../../decoy.tif",
+    "linear", "srgb", "unknown", "1996-06-21T12:00:00", "1996-13-45T99:00:00+00:00",
+    "1996-06-21T12:00:00+00:00", [], [1, 2], [0.0, 0.0, 0.0], [1e308, 1e308, 1e308], {},
+    {"ghi": -5}, {"dni": "a"}, "mesh.obj", "../mesh.obj", "\u00e9\u4e2d", "a" * 5000,
+)  # fmt: skip
+_FUZZ_FIELDS = (
+    ("format",), ("site",), ("site", "latitude"), ("site", "longitude"), ("site", "elevation"),
+    ("camera",), ("camera", "position"), ("pixel_encoding",), ("ground_reflectance",),
+    ("frames",), ("frames", 0), ("frames", 1, "file"), ("frames", 0, "time"),
+    ("frames", 2, "exposure"), ("frames", 1, "irradiance"), ("facets",), ("facets", 0, "id"),
+    ("facets", 1, "normal"), ("facets", 2, "center"), ("object_mesh",), ("truth",),
+)  # fmt: skip
+
+
+def _fuzz_manifest(manifest, rng):
+    field = _FUZZ_FIELDS[rng.integers(len(_FUZZ_FIELDS))]
+
+    def holds(node, key):
+        if isinstance(node, dict):
+            return isinstance(key, str)
+        return isinstance(node, list) and isinstance(key, int) and key < len(node)
+
+    node = manifest
+    for key in field[:-1]:
+        if not (holds(node, key) and (isinstance(node, list) or key in node)):
+            return
+        node = node[key]
+    last = field[-1]
+    if not holds(node, last):
+        return
+    if rng.random() < 0.2 and isinstance(node, dict):
+        node.pop(last, None)
+    else:
+        node[last] = _FUZZ_VALUES[rng.integers(len(_FUZZ_VALUES))]
+
+
+def _fuzz_bytes(data: bytes, rng) -> bytes:
+    data = bytearray(data)
+    kind = rng.integers(4)
+    if kind == 0:  # truncate
+        return bytes(data[: rng.integers(len(data) + 1)])
+    if kind == 1:  # flip bytes in the header
+        for _ in range(rng.integers(1, 6)):
+            data[rng.integers(min(64, len(data)))] = rng.integers(256)
+        return bytes(data)
+    if kind == 2:  # a huge declared size in a PNG or TIFF header
+        data[16:24] = struct.pack(">II", *rng.integers(1, 2**31, 2))
+        return bytes(data)
+    return bytes(rng.integers(0, 256, rng.integers(0, 200), dtype=np.uint8))  # noise
+
+
+def _fuzz(n: int, seed: int, folder) -> dict:
+    """Read ``n`` mutated copies of a small bundle; what went wrong, if anything."""
+    import resource
+    import shutil
+
+    folder = Path(folder)
+    rng = np.random.default_rng(seed)
+    base, _ = _write(folder, name="base")
+    base = Path(base)
+    manifest0 = json.loads((base / bd.MANIFEST).read_text())
+    (folder / "decoy.tif").write_bytes((base / "frames" / "f000.tif").read_bytes())
+    outside = []
+    current = {}
+
+    def hook(event, args):  # a file under the fuzz folder but outside the bundle opened
+        if event == "open" and current and isinstance(args[0], str | bytes | os.PathLike):
+            p = Path(os.fsdecode(args[0])).absolute()
+            if p.is_relative_to(folder) and not p.is_relative_to(current["root"]):
+                outside.append(str(p))
+
+    sys.addaudithook(hook)
+    tracebacks = []
+    for i in range(n):
+        root = folder / f"m{i % 8}"
+        shutil.rmtree(root, ignore_errors=True)
+        shutil.copytree(base, root)
+        manifest = json.loads(json.dumps(manifest0))
+        for _ in range(rng.integers(1, 4)):
+            target = rng.integers(6)
+            if target <= 2:
+                _fuzz_manifest(manifest, rng)
+            elif target == 3:
+                name = bd.LABELS
+                (root / name).write_bytes(_fuzz_bytes((root / name).read_bytes(), rng))
+            elif target == 4:
+                name = f"frames/f00{rng.integers(4)}.tif"
+                (root / name).write_bytes(_fuzz_bytes((root / name).read_bytes(), rng))
+            else:
+                link = root / "frames" / f"f00{rng.integers(4)}.tif"
+                link.unlink()
+                link.symlink_to(folder / "decoy.tif")
+        text = json.dumps(manifest)
+        if rng.random() < 0.05:
+            text = text[: rng.integers(len(text))]
+        (root / bd.MANIFEST).write_text(text)
+        current["root"] = root
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                b = bd.read_bundle(root)
+                bd.facet_curves(b)
+        except bd.BundleError as err:
+            if "\n" in str(err).strip():
+                tracebacks.append(f"{i}: multi-line error {err!s:.200}")
+        except Exception as err:  # a traceback a user would see
+            tracebacks.append(f"{i}: {type(err).__name__}: {err!s:.200}")
+        finally:
+            current.clear()
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB
+    return {"tracebacks": tracebacks, "outside": sorted(set(outside)), "peak_mib": peak}
+
+
+def test_reader_fuzz_1000_mutated_bundles(tmp_path):
+    # 1000 bundles with mutated manifests (wrong types, huge and NaN numbers,
+    # paths out of the bundle, missing keys, truncation), label and frame
+    # files (truncated, header bytes flipped, huge declared sizes, noise) and
+    # frames linked to a file outside: the reader (and the curves' read of
+    # every pixel) raises only BundleError, opens nothing outside the
+    # bundle, and peaks under 1 GB. Seeded; the child process's peak is its
+    # own (imports included, ~200 MB)
+    code = (
+        "import json, sys; sys.path.insert(0, sys.argv[1]); import test_bundle as t; "
+        "print(json.dumps(t._fuzz(1000, 20261124, sys.argv[2])))"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert not out["tracebacks"], out["tracebacks"][:10]
+    assert not out["outside"], out["outside"][:10]
+    assert out["peak_mib"] < 1024, out["peak_mib"]
+
+
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda m: m["site"].update(latitude=10**400), "site.latitude"),
+        (lambda m: m["site"].update(elevation=44400.0), "site.elevation"),
+        (lambda m: m["site"].update(elevation=-1e308), "site.elevation"),
+    ],
+)
+def test_numbers_no_float_holds_are_one_line_errors(tmp_path, edit, field):
+    # latitude 1e400 written as an integer (OverflowError before) and an
+    # elevation pvlib's pressure model cannot take (TypeError before)
+    path, _ = _write(tmp_path)
+    _edit_manifest(path, edit)
+    with pytest.raises(bd.BundleError, match=field.replace(".", r"\.")) as err:
+        bd.read_bundle(path)
+    assert len(str(err.value)) < 300 and "\n" not in str(err.value)
