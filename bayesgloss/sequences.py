@@ -61,6 +61,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -87,6 +88,14 @@ __all__ = [
     "auto_exposure",
     "DEFAULT_AMBIENT",
 ]
+
+#: A sequence's name: it names the bundle's folder under ``--out``.
+NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}"
+#: rtrace's ambient and sampling options a config may set (each with a
+#: number), and its switches; nothing else reaches rtrace's command line
+#: (``-e FILE`` once made rtrace write a file anywhere).
+AMBIENT_OPTIONS = ("-ab", "-aa", "-ar", "-ad", "-as", "-lr", "-lw", "-dj", "-ds", "-dt", "-dc")
+AMBIENT_SWITCHES = ("-u-", "-u+", "-u")
 
 #: rtrace settings for the test sequences: two bounces (facet -> ground ->
 #: sky), irradiance cache at 10 % accuracy with a resolution fine for the
@@ -242,7 +251,9 @@ class SequenceConfig:
     category: str | None = None
 
     def __post_init__(self):
-        problems = []
+        problems = self._input_problems()
+        if problems:  # the checks below need the right types
+            raise ValueError(f"sequence config {str(self.name)[:80]!r}: " + "; ".join(problems))
         if not -90 <= self.latitude <= 90:
             problems.append(f"latitude {self.latitude} outside [-90, 90]")
         if not -180 <= self.longitude <= 180:
@@ -265,6 +276,63 @@ class SequenceConfig:
         problems += self._frame_problems() + self._camera_problems()
         if problems:
             raise ValueError(f"sequence config {self.name!r}: " + "; ".join(problems))
+
+    def _input_problems(self) -> list[str]:
+        """Types and forms a hand-written config may get wrong: the name a
+        plain file name (it names the bundle's folder), the frame times a
+        list, each time with its UTC offset, ambient settings from
+        :data:`AMBIENT_OPTIONS` with numeric values, the image size an
+        integer."""
+        problems = []
+        if not isinstance(self.name, str) or not re.fullmatch(NAME_PATTERN, self.name):
+            problems.append(
+                f"name {str(self.name)[:80]!r} is not a plain name (letters, digits, '.', '_', "
+                "'-', not starting with '.'; it names the bundle's folder)"
+            )
+        if isinstance(self.image_size, bool) or not isinstance(self.image_size, int):
+            problems.append(f"image_size {self.image_size!r} is not an integer")
+        if self.times is not None:
+            if not isinstance(self.times, tuple) or not self.times:
+                problems.append(f"times {self.times!r} is not a non-empty list of times")
+            else:
+                for t in self.times:
+                    try:
+                        naive = pd.Timestamp(t).tzinfo is None
+                    except (ValueError, TypeError):
+                        problems.append(f"times: {t!r} is not an ISO 8601 time")
+                        break
+                    if naive:
+                        problems.append(f"times: {t!r} has no UTC offset")
+                        break
+        else:
+            hours = self.solar_hours
+            if not isinstance(hours, tuple) or not hours:
+                problems.append(f"solar_hours {hours!r} is not a non-empty list of hours")
+            elif not all(
+                isinstance(h, int | float) and not isinstance(h, bool) and 0 <= h <= 24
+                for h in hours
+            ):
+                problems.append(f"solar_hours {hours!r} are not all numbers in [0, 24]")
+        options = self.ambient
+        if not isinstance(options, tuple) or len(options) % 2 and "-u-" not in options:
+            problems.append(f"ambient {options!r} is not a list of rtrace options")
+        else:
+            items = [o for o in options if o not in AMBIENT_SWITCHES]
+            for opt, value in zip(items[::2], items[1::2], strict=False):
+                if opt not in AMBIENT_OPTIONS:
+                    problems.append(
+                        f"ambient option {str(opt)[:40]!r} is not one of "
+                        f"{', '.join(AMBIENT_OPTIONS + AMBIENT_SWITCHES)}"
+                    )
+                    break
+                try:
+                    float(value)
+                except (TypeError, ValueError):
+                    problems.append(f"ambient option {opt} needs a number, got {value!r}")
+                    break
+            if len(items) % 2:
+                problems.append(f"ambient option {items[-1]!r} has no value")
+        return problems
 
     def _frame_problems(self) -> list[str]:
         n = self.n_frames

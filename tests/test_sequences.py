@@ -492,3 +492,28 @@ def test_gem_is_convex_with_planar_outward_facets(stand):
     r = 0.25 if stand == "culet" else 0.55
     np.testing.assert_allclose(area, [0, 0, 2 * np.sqrt(2) * r**2], atol=1e-12)
     assert gem.normal[-1] == pytest.approx([0, 0, 1])
+
+
+@pytest.mark.parametrize(
+    "values, problem",
+    [
+        ({"name": "../escape"}, "not a plain name"),
+        ({"name": "a/b"}, "not a plain name"),
+        ({"ambient": ["-ab", "1", "-e", "/tmp/anywhere"]}, "ambient option '-e'"),
+        ({"ambient": ["-ab", "two"]}, "needs a number"),
+        ({"solar_hours": "12"}, "solar_hours '12'"),
+        ({"solar_hours": []}, "solar_hours"),
+        ({"solar_hours": [12, 25]}, "in \\[0, 24\\]"),
+        ({"times": ["2020-06-21T12:00:00"]}, "no UTC offset"),
+        ({"times": ["noon"]}, "not an ISO 8601 time"),
+        ({"image_size": 8.5}, "image_size 8.5 is not an integer"),
+    ],
+)
+def test_render_configs_reject_bad_names_options_and_forms(values, problem):
+    # a name with '../' once wrote the bundle outside --out; an ambient list
+    # passed any option to rtrace ('-e FILE' wrote a file anywhere);
+    # solar_hours "12" rendered hours 1 and 2; naive times and a fractional
+    # image size gave tracebacks
+    with pytest.raises(ValueError, match=problem):
+        sequences.SequenceConfig.from_dict({"name": "ok", **values})
+    sequences.SequenceConfig.from_dict({"name": "ok-1.b_2"})  # a plain name passes
