@@ -414,11 +414,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         where = f"frames[{i}]"
         if not isinstance(frame, dict):
             raise check.fail(where, f"must be an object, got {frame!r}")
-        file = check.get(frame, "file", where, str)
-        if not file or Path(file).is_absolute():
-            raise check.fail(
-                f"{where}.file", f"must be a path relative to the bundle, got {file!r}"
-            )
+        file = _relative_path(check, check.get(frame, "file", where, str), f"{where}.file")
         files.append(file)
         times.append(_parse_time(check, check.get(frame, "time", where, str), f"{where}.time"))
         exposure = check.get(frame, "exposure", where, float, required=False)
@@ -464,8 +460,7 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
     truth = check.get(manifest, "truth", "", dict, required=False)
     mesh = check.get(manifest, "object_mesh", "", str, required=False)
     if mesh is not None:
-        if not mesh or Path(mesh).is_absolute():
-            raise check.fail("object_mesh", f"must be a path relative to the bundle, got {mesh!r}")
+        _relative_path(check, mesh, "object_mesh")
         if Path(mesh).suffix.lower() not in MESH_SUFFIXES:
             raise check.fail(
                 "object_mesh", f"must name an OBJ or PLY file (.obj, .ply), got {mesh!r}"
@@ -484,6 +479,13 @@ def _parse_manifest(manifest: Any, bundle: Any) -> _Manifest:
         np.array(irradiance, dtype=float).reshape(-1, 3),
         mesh,
     )
+
+
+def _relative_path(check: _Checker, name: str, field: str) -> str:
+    """``name`` if it is a non-empty relative path, else a BundleError naming ``field``."""
+    if not name or Path(name).is_absolute():
+        raise check.fail(field, f"must be a path relative to the bundle, got {_short(name)}")
+    return name
 
 
 def _inside_bundle(check: _Checker, root: Path, name: str, field: str) -> Path:

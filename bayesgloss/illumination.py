@@ -88,8 +88,6 @@ __all__ = [
     "frame_weights",
     "predict",
     "log_likelihood_sigma_marginal",
-    "log_likelihood_sigma_marginal_mu",
-    "unit_scale_mean",
     "frame_log_likelihood",
     "pointwise_log_likelihood",
     "sample_prior",
@@ -554,17 +552,11 @@ def frame_weights(lam, data: JointData):
 def predict(theta, lam, data: JointData, parts=None) -> np.ndarray:
     """mu_ft, (E, F, W, T), for theta (E, F, W, >= 3) and lam (E, W, T, L)."""
     parts = unit_parts(theta, data) if parts is None else parts
-    return np.exp(theta[..., 2:3]) * unit_scale_mean(parts, lam, data)
-
-
-def unit_scale_mean(parts, lam, data: JointData) -> np.ndarray:
-    """mu_ft / s_f, (E, F, W, T): the :func:`unit_parts` ``parts`` weighted by
-    each frame's sun, sky and exposure (:func:`frame_weights`) and summed."""
     weights = frame_weights(lam, data)
     mu = weights[0] * parts[0]
     for wk, pk in zip(weights[1:], parts[1:], strict=True):
         mu += wk * pk
-    return mu
+    return np.exp(theta[..., 2:3]) * mu
 
 
 def _residuals(mu, data: JointData):
@@ -583,13 +575,8 @@ def log_likelihood_sigma_marginal(theta, lam, data: JointData, parts=None, with_
     The closed form of :func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`
     with Q = sum_t z'_t^2 and the sd per unit sigma v_t = mu_ft + c_f.
     """
-    return log_likelihood_sigma_marginal_mu(predict(theta, lam, data, parts), data, with_q)
-
-
-def log_likelihood_sigma_marginal_mu(mu, data: JointData, with_q=False):
-    """:func:`log_likelihood_sigma_marginal` of the model's curves ``mu`` (E, F, W, T)."""
     la, lb = data.priors.log_sigma
-    z, log_v = _residuals(mu, data)
+    z, log_v = _residuals(predict(theta, lam, data, parts), data)
     q = np.maximum(np.sum(z * z, axis=-1), 1e-300)
     k, const, (lo_cut, hi_cut) = data.sigma_constants
     shape = q.shape

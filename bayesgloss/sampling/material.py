@@ -133,12 +133,16 @@ class _MaterialChain(_JointChain):
         sky = sky * np.exp(-lam[..., 2])[:, None]  # e sum_k w_k K^k at b = 1
         w = self.profile_weights[None, :, None, :]
         y = self.data.y[None, :, None, :]
+
+        def scales(a, b):  # each facet's least-squares scale given the frames
+            unit = a[:, None] * sun + b[:, None] * sky
+            s = np.sum(w * y * unit, -1) / np.maximum(np.sum(w * unit * unit, -1), 1e-300)
+            return np.maximum(s, 1e-300)
+
         a = np.ones(lam.shape[:-1])
         b = np.ones(lam.shape[:-1])
         for _ in range(rounds):
-            unit = a[:, None] * sun + b[:, None] * sky
-            s = np.sum(w * y * unit, -1) / np.maximum(np.sum(w * unit * unit, -1), 1e-300)
-            s = np.maximum(s, 1e-300)[..., None]
+            s = scales(a, b)[..., None]
             x1, x2 = s * sun, s * sky
             h11, h12, h22 = (np.sum(w * u * v, 1) for u, v in ((x1, x1), (x1, x2), (x2, x2)))
             g1, g2 = np.sum(w * y * x1, 1), np.sum(w * y * x2, 1)
@@ -150,9 +154,7 @@ class _MaterialChain(_JointChain):
             # a frame no facet sees stays at the model's brightness
             a = np.maximum(np.where(np.isfinite(a), a, 1.0), 0.01)
             b = np.maximum(np.where(np.isfinite(b), b, 1.0), 0.01)
-        unit = a[:, None] * sun + b[:, None] * sky
-        s = np.sum(w * y * unit, -1) / np.maximum(np.sum(w * unit * unit, -1), 1e-300)
-        log_s = np.log(np.maximum(s, 1e-300))
+        log_s = np.log(scales(a, b))
         level = log_s.mean(1)  # (E, H)
         frames = np.stack([np.log(a), np.log(b)], -1) + level[..., None, None]
         return log_s - level[:, None], frames
