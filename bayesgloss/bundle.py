@@ -54,14 +54,21 @@ facet centre (within 1e-3 times the object's size, the diagonal of the box
 around the facet centres, or within 1 mm when the centres coincide), where
 the viewing direction is undefined, or behind every facet, (position -
 center) . normal <= 0 for all of them (as for a camera inside a convex
-object). Every listed facet counts, since a listed facet that
-``facets.png`` never holds is rejected first. It *reports* in the
-facet curves' ``valid`` mask and ``flags``, and does not reject: frames with
-the sun below the horizon, NaN or infinite pixels, saturated pixels, and
-facets with fewer than ``min_pixels`` (default :data:`MIN_PIXELS` = 4)
-labelled pixels. It *warns* (:class:`BundleWarning`) of labels that no facet
-lists (their pixels are ignored) and of frames that share a time: those are
-kept, each frame an independent observation of the same sun and sky.
+object); a PNG frame of fewer than 8 bits per sample. Every listed facet
+counts, since a listed facet that ``facets.png`` never holds is rejected
+first. It *reports* in the facet curves' ``valid`` mask and ``flags``, and
+does not reject: frames with the sun below the horizon, NaN or infinite
+pixels, saturated pixels, a negative luminance (float images: a facet whose
+mean or median is below 0 cannot be a radiance; single negative pixels, as
+noise about a black level, are kept), facets seen from behind ((position -
+center) . normal <= 0 for some but not all facets), and facets with fewer
+than ``min_pixels`` (default :data:`MIN_PIXELS` = 4) labelled pixels. It
+*warns* (:class:`BundleWarning`) of labels that no facet lists (their pixels
+are ignored), of frames that share a time (those are kept, each frame an
+independent observation of the same sun and sky), and of a camera below
+``z = 0`` and below every facet centre (under the ground of bundles that put
+it at ``z = 0``, as bayesgloss's own do; the spec fixes no origin, so this
+is a warning).
 
 Frames keep the manifest's order, which need not be the order of their
 times: the reader does not sort them, and neither warns of nor rejects
@@ -71,6 +78,7 @@ frames out of time order.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import math
 import os
@@ -115,6 +123,8 @@ from .sky import WHITE_EFFICACY  # Radiance's 179 lm/W: cd m^-2 per W sr^-1 m^-2
 __all__ = [
     "NoUsableData",
     "usable_facets",
+    "facing_camera",
+    "bundle_digest",
     "FLAG_REASONS",
     "FORMAT",
     "FRAME_FORMATS",
@@ -166,7 +176,14 @@ MESH_SUFFIXES = (".obj", ".ply")
 #: Facets with fewer labelled pixels are reported as ``too-few-pixels``.
 MIN_PIXELS = 4
 #: Reasons an observation is left out, in the order of :attr:`FacetCurves.flag_bits`.
-FLAG_REASONS = ("sun-below-horizon", "nan-pixels", "saturated", "too-few-pixels")
+FLAG_REASONS = (
+    "sun-below-horizon",
+    "nan-pixels",
+    "saturated",
+    "too-few-pixels",
+    "negative-luminance",
+    "seen-from-behind",
+)
 #: Robust summaries of a facet's pixel luminances.
 STATISTICS = ("mean", "median")
 #: ``frame_format`` of :func:`write_bundle`: file suffix of each.
@@ -223,8 +240,13 @@ class NoUsableData(ValueError):
     """No facet of a bundle has enough usable frames for an estimate."""
 
 
-def usable_facets(bundle, usable, min_frames: int) -> np.ndarray:
-    """Facets with at least ``min_frames`` usable frames, (F,) of bool.
+def usable_facets(bundle, usable, min_frames: int, censored=None, min_measured: int = 2):
+    """Facets with at least ``min_frames`` usable frames, ``min_measured`` of
+    them measured rather than censored, (F,) of bool.
+
+    A censored entry (every saturated pixel at the top code) is only a lower
+    bound: a facet seen saturated in every frame says nothing of its curve's
+    shape under a free scale, however many frames it has.
 
     Parameters
     ----------
@@ -233,21 +255,36 @@ def usable_facets(bundle, usable, min_frames: int) -> np.ndarray:
         Usable entries of the bundle's facet curves.
     min_frames : int
         Usable frames an estimator needs per facet [-].
+    censored : ndarray (F, T) of bool, optional
+        Usable entries that are lower bounds only (saturated). -
+    min_measured : int, default 2
+        Usable entries that are not censored a facet needs [-]. -
 
     Raises
     ------
     NoUsableData
-        Where no facet has them (every frame at night, a single frame...),
-        naming the bundle and saying how many frames have the sun up.
+        Where no facet has them (every frame at night, a single frame, every
+        pixel saturated...), naming the bundle and saying how many frames
+        have the sun up and how many entries are saturated.
     """
     usable = np.asarray(usable, dtype=bool)
-    keep = usable.sum(axis=1) >= min_frames
+    censored = np.zeros_like(usable) if censored is None else np.asarray(censored, dtype=bool)
+    measured = (usable & ~censored).sum(axis=1)
+    keep = (usable.sum(axis=1) >= min_frames) & (measured >= min_measured)
     if not np.any(keep):
         n_up, n_t = int(np.sum(bundle.sun_up)), len(bundle.sun_up)
         best = int(usable.sum(axis=1).max()) if usable.size else 0
+        saturated = ""
+        if censored.any():
+            saturated = (
+                f"; {int(censored.sum())} of {int(usable.sum())} usable entries are saturated "
+                f"(lower bounds only), and the best facet has {int(measured.max())} measured, "
+                f"{min_measured} needed: lower the exposure"
+            )
         raise NoUsableData(
             f"bundle '{bundle.path}': no facet has enough usable frames: {n_up} of {n_t} "
             f"frames have the sun up, the best facet has {best} usable, {min_frames} needed"
+            + saturated
         )
     return keep
 
@@ -528,7 +565,7 @@ def _check_camera(check: _Checker, position: np.ndarray, facets: Facets) -> None
             f"{_CAMERA_AT_CENTER:g} x the object's size ({size:.3g} m), so that facet has "
             "no viewing direction",
         )
-    facing = np.sum(offset * np.asarray(facets.normal, dtype=float), axis=-1)
+    facing = facing_camera(position, facets)
     if np.all(facing <= 0.0):
         best = int(np.argmax(facing))
         raise check.fail(
@@ -538,6 +575,49 @@ def _check_camera(check: _Checker, position: np.ndarray, facets: Facets) -> None
             f"{facing[best]:.3g} m, facets[{best}]), so no facet faces the camera (is it "
             "inside the object, or on a side of it that no listed facet faces?)",
         )
+
+
+def facing_camera(position, facets: Facets) -> np.ndarray:
+    """(position - center) . normal of each facet, m: positive where the facet
+    faces the camera, zero or negative where it is seen edge-on or from behind."""
+    offset = np.asarray(position, dtype=float) - np.asarray(facets.center, dtype=float)
+    return np.sum(offset * np.asarray(facets.normal, dtype=float), axis=-1)
+
+
+def _below_ground_warning(bundle: Any, position: np.ndarray, facets: Facets) -> str | None:
+    """The warning text for a camera below ``z = 0`` and every facet centre, or None."""
+    lowest = float(np.min(np.asarray(facets.center, dtype=float)[:, 2]))
+    if position[2] >= 0.0 or position[2] >= lowest:
+        return None
+    return (
+        f"bundle '{bundle}': camera.position {position.tolist()} is below z = 0 and below "
+        f"every facet centre (the lowest at z = {lowest:.3g} m): if z = 0 is the ground, as "
+        "in the bundles bayesgloss renders, the camera is under it"
+    )
+
+
+def bundle_digest(bundle: "Bundle") -> str:
+    """SHA-256 (hex) of what a bundle's estimate depends on: the manifest's and
+    the label image's bytes, and each frame's (and the mesh's) name, size and
+    modification time (ns).
+
+    Stat rather than read the frames: a bundle's frames may be gigabytes, and
+    a frame replaced or rewritten changes its time or size. The key of a
+    finished result (:func:`bayesgloss.cli` over several bundles) and the
+    check that ``report`` draws the bundle a result was computed from.
+    """
+    digest = hashlib.sha256()
+    root = Path(bundle.path).resolve()
+    for name in (MANIFEST, LABELS):
+        data = (root / name).read_bytes()
+        digest.update(f"{name}\0{len(data)}\0".encode())
+        digest.update(data)
+    mesh = bundle.manifest.get("object_mesh") if isinstance(bundle.manifest, dict) else None
+    for file in (*bundle.frame_files, *([root / mesh] if mesh else [])):
+        st = Path(file).stat()
+        name = os.path.relpath(Path(file).resolve(), root)
+        digest.update(f"{name}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    return digest.hexdigest()
 
 
 def _same_time_warning(bundle: Any, times: pd.DatetimeIndex) -> str | None:
@@ -818,6 +898,12 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
                     else f"{LABELS} is {_size(labels.shape)}"
                 ),
             )
+        if info.bits is not None and info.bits < 8:
+            raise check.fail(
+                where,
+                f"frame '{name}' is a {info.bits}-bit PNG; frames need 8 or 16 bits per sample "
+                "(a 1-, 2- or 4-bit image holds too few levels to measure a brightness)",
+            )
         if info.channels not in (1, 2, 3, 4):
             raise check.fail(where, f"frame '{name}' has {info.channels} channels, not 1-4")
         if info.dtype not in (np.uint8, np.uint16) and info.dtype.kind != "f":
@@ -844,6 +930,9 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
             BundleWarning,
             stacklevel=2,
         )
+    below = _below_ground_warning(path, parsed.camera_position, parsed.facets)
+    if below:
+        warnings.warn(below, BundleWarning, stacklevel=2)
     same_time = _same_time_warning(path, parsed.times)
     if same_time:
         warnings.warn(same_time, BundleWarning, stacklevel=2)
@@ -1008,9 +1097,10 @@ def facet_curves(
         Luminance in cd m^-2 for ``linear-radiance``; see
         :attr:`FacetCurves.unit` for the others. An entry is invalid (and
         flagged) when the sun is below the horizon, when any of the facet's
-        pixels is NaN/infinite or saturated, or when the facet has fewer than
-        ``min_pixels`` pixels; its luminance is still computed from the
-        remaining good pixels.
+        pixels is NaN/infinite or saturated, when its statistic is negative,
+        when the camera sees the facet from behind or edge-on, or when the
+        facet has fewer than ``min_pixels`` pixels; its luminance is still
+        computed from the remaining good pixels.
 
     Raises
     ------
@@ -1076,6 +1166,8 @@ def facet_curves(
         "nan-pixels": n_nonfinite > 0,
         "saturated": n_saturated > 0,
         "too-few-pixels": (n_pixels < min_pixels)[:, None],
+        "negative-luminance": luminance < 0.0,
+        "seen-from-behind": (facing_camera(bundle.camera_position, bundle.facets) <= 0.0)[:, None],
     }
     bits = np.zeros((n_facets, n_frames), np.uint8)
     for k, reason in enumerate(FLAG_REASONS):  # bit k: FLAG_REASONS[k]

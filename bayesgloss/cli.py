@@ -288,9 +288,10 @@ def _estimate_many(args, progress) -> int:
 
     if not args.out:
         raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
-    skies = []
+    skies, contents = [], []
     for b in args.bundle:  # reject bad bundles before any work starts
         bundle = bundle_io.read_bundle(b)
+        contents.append(bundle_io.bundle_digest(bundle))  # a finished unit is this content's
         # each unit names its sky: the one estimate_bundle would choose
         skies.append(
             args.sky
@@ -311,9 +312,10 @@ def _estimate_many(args, progress) -> int:
                 or (estimate.JOINT_MAX_SWEEPS if args.per_frame else 8000),
                 # only where set, so that other runs keep their units' keys
                 **({"per_frame": True} if args.per_frame else {}),
+                "bundle_content": content,
             },
         )
-        for b, sky_name in zip(args.bundle, skies, strict=True)
+        for b, sky_name, content in zip(args.bundle, skies, contents, strict=True)
     ]
     folders = runner.run_units(
         estimate.estimate_unit,
@@ -367,6 +369,13 @@ def _report(args: argparse.Namespace) -> int:
     result = Path(args.result)
     res = estimate.read_result(result)
     b = bundle_io.read_bundle(args.bundle or res.summary["bundle"])
+    made_from = res.summary.get("bundle_content")
+    if not args.bundle and made_from and bundle_io.bundle_digest(b) != made_from:
+        raise ValueError(
+            f"result '{result}': its bundle '{b.path}' has changed since the estimate (manifest, "
+            "labels or frames differ from what summary.json records): run the estimate again, "
+            "or name a bundle with --bundle"
+        )
     comparison = (
         (result / "comparison.txt").read_text() if (result / "comparison.txt").exists() else None
     )

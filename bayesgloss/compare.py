@@ -310,7 +310,7 @@ def bundle_models(
     b = b if isinstance(b, bundle_io.Bundle) else bundle_io.read_bundle(b)
     curves = bundle_io.facet_curves(b)
     y, usable, censored = estimate.observations(curves)
-    keep = bundle_io.usable_facets(b, usable, min_frames)
+    keep = bundle_io.usable_facets(b, usable, min_frames, censored)
     models = {}
     for ill in illumination:
         phong = estimate.bundle_bases(b, ill)

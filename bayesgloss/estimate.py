@@ -46,10 +46,17 @@ sky models of :func:`bayesgloss.sky.sky_models` (``"point-sun"``, the
 paper's sun with no sky; gensky's clear, intermediate, overcast and uniform
 skies; the 15 CIE general skies; Perez).
 
-A facet needs at least :data:`MIN_FRAMES` usable frames; a bundle in which
-no facet has them (every frame at night, a single frame) is rejected with
-:class:`bayesgloss.bundle.NoUsableData`, which says how many frames have
-the sun up.
+A facet needs at least :data:`MIN_FRAMES` usable frames, two of them
+measured (a saturated entry enters as a lower bound only); a bundle in which
+no facet has them (every frame at night, a single frame, every pixel
+saturated) is rejected with :class:`bayesgloss.bundle.NoUsableData`, which
+says how many frames have the sun up and how many entries saturate.
+
+Flags of the summary: a facet ``not-converged``, ``gloss-not-identifiable``
+(90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`),
+``mostly-saturated`` (more than half its usable entries are lower bounds),
+or, left out, ``too-few-frames`` or ``saturated`` (too few measured
+entries); the object the same, ``mostly-saturated`` over the facets used.
 
 :func:`estimate_unit` is one bundle's estimate as files
 (:func:`result_files`), the unit of work that
@@ -321,7 +328,7 @@ def estimate_bundle(
     curves = bundle_io.facet_curves(b)
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)
-    keep = bundle_io.usable_facets(b, usable, MIN_FRAMES)
+    keep = bundle_io.usable_facets(b, usable, MIN_FRAMES, censored)
     joint = _joint_possible(per_frame, noise, camera)
     if illumination is None:
         illumination = default_illumination(b, per_frame=per_frame, noise=noise, camera=camera)
@@ -426,10 +433,20 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
                 "flags": flags,
             }
         )
-    for fid in curves.ids[~keep]:
+    _, usable, censored = observations(curves)
+    for k in np.flatnonzero(~keep):
+        short = usable[k].sum() < MIN_FRAMES  # else too few measured: saturated
         facets.append(
-            {"id": int(fid), "gamma": None, "converged": False, "flags": ["too-few-frames"]}
+            {
+                "id": int(curves.ids[k]),
+                "gamma": None,
+                "converged": False,
+                "flags": ["too-few-frames" if short else "saturated"],
+            }
         )
+    for k, f in zip(np.flatnonzero(keep), facets, strict=False):
+        if censored[k].sum() > 0.5 * usable[k].sum():  # mostly lower bounds
+            f["flags"].append("mostly-saturated")
     conv = diag["converged"]
     use = conv if conv.sum() >= 2 else np.ones(len(conv), dtype=bool)
     pop = population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)
@@ -446,6 +463,8 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         obj_converged = bool(np.all(conv)) and len(ids) > 0
         model = "population (hierarchical Beta)"
     obj_flags = [] if obj_converged else ["not-converged"]
+    if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
+        obj_flags.append("mostly-saturated")
     if obj_q["q95"] - obj_q["q05"] > NOT_IDENTIFIABLE_WIDTH:
         obj_flags.append("gloss-not-identifiable")
     summary = {
@@ -467,6 +486,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         "camera": camera,
         "unit": curves.unit,
         "bundle": str(Path(b.path).resolve()),
+        "bundle_content": bundle_io.bundle_digest(b),
         "sampler": run,
         "per_frame_illumination": used is not None,
     }
@@ -491,15 +511,26 @@ def estimate_unit(
     seed: int = 0,
     max_steps: int | None = 8000,
     per_frame: bool = False,
+    bundle_content: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
     The unit of work of :func:`bayesgloss.runner.run_units` over many
     bundles; it runs in one process (parallelism is across units), so the
-    result is the same whatever executor runs it.
+    result is the same whatever executor runs it. ``bundle_content``, the
+    bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
+    planned, makes the unit's key follow the bundle's content (a bundle
+    whose frames were replaced is a new unit, not a finished one); a bundle
+    changed since is an error.
     """
+    b = bundle_io.read_bundle(bundle)
+    if bundle_content is not None and bundle_io.bundle_digest(b) != bundle_content:
+        raise ValueError(
+            f"bundle '{bundle}' changed while the run was under way (its manifest, labels or "
+            "frames differ from when the run started): run again"
+        )
     res = estimate_bundle(
-        bundle,
+        b,
         illumination=illumination,
         noise=noise,
         camera=camera,

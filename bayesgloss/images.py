@@ -356,6 +356,7 @@ class ImageInfo(NamedTuple):
     channels: int
     dtype: np.dtype  # sample type as read (uint8, uint16, float16/32/64)
     kind: str  # "hdr", "png", "tiff" or "exr"
+    bits: int | None = None  # bits per stored sample where the header says (PNG), else None
 
 
 def image_kind(path: Path) -> str:
@@ -565,7 +566,7 @@ def image_info(path: str | os.PathLike) -> ImageInfo:
         if channels is None or width < 1 or height < 1:
             raise ValueError(f"{path.name}: bad PNG header")
         dtype = np.uint16 if depth == 16 and colour != 3 else np.uint8
-        return ImageInfo(height, width, channels, np.dtype(dtype), kind)
+        return ImageInfo(height, width, channels, np.dtype(dtype), kind, int(depth))
     if kind == "tiff":
         import tifffile
 

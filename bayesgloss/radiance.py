@@ -11,7 +11,10 @@ west-positive. ``rtrace`` samples with ``-u-`` (repeatable) by default here.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -28,6 +31,8 @@ __all__ = [
     "polygons",
     "oconv",
     "rtrace",
+    "scratch_folder",
+    "remove_orphan_scratch",
     "RTRACE_ACCURATE",
 ]
 
@@ -224,8 +229,61 @@ def rtrace(octree, origins, directions, options=RTRACE_ACCURATE) -> np.ndarray:
     return np.frombuffer(out, dtype=np.float32).reshape(-1, 3).astype(float)
 
 
+#: Scratch folders in the temporary directory: ``bayesgloss-<kind>-<pid>-<random>``.
+_SCRATCH = re.compile(r"bayesgloss-[a-z]+-(\d+)-")
+
+
+def _running(pid: int) -> bool:
+    """Whether a process ``pid`` exists (of any user)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's
+        return True
+    return True
+
+
+def remove_orphan_scratch(folder=None) -> list[Path]:
+    """Remove the scratch folders of processes that no longer run.
+
+    A render killed with SIGKILL cannot remove its scratch folder (an octree
+    of up to tens of MB); the next one does, here. Only this user's folders
+    whose name carries a process id that no longer exists are removed.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    removed = []
+    folder = Path(folder or tempfile.gettempdir())
+    for path in folder.glob("bayesgloss-*-*-*"):
+        match = _SCRATCH.match(path.name)
+        if not match or not path.is_dir() or path.is_symlink():
+            continue
+        try:
+            mine = path.stat().st_uid == os.getuid()
+        except OSError:
+            continue
+        if mine and not _running(int(match.group(1))):
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(path)
+    return removed
+
+
+@contextlib.contextmanager
+def scratch_folder(kind: str):
+    """A temporary folder ``bayesgloss-<kind>-<pid>-...`` for Radiance's files,
+    removed on exit; orphans of killed processes are removed on entry
+    (:func:`remove_orphan_scratch`)."""
+    remove_orphan_scratch()
+    with tempfile.TemporaryDirectory(prefix=f"bayesgloss-{kind}-{os.getpid()}-") as tmp:
+        yield tmp
+
+
 def rtrace_scene(scene: str, origins, directions, options=RTRACE_ACCURATE) -> np.ndarray:
     """Compile ``scene`` in a temporary folder and trace rays through it."""
-    with tempfile.TemporaryDirectory(prefix="bayesgloss-rad-") as tmp:
+    with scratch_folder("rad") as tmp:
         octree = oconv(scene, Path(tmp) / "scene.oct")
         return rtrace(octree, origins, directions, options)

@@ -591,7 +591,7 @@ def label_image(config: SequenceConfig, facets: geometry.Facets) -> np.ndarray:
     oc, dc = camera_rays(config, facets, corners=False)
     ok, dk = camera_rays(config, facets, corners=True)
     rays = np.concatenate([np.concatenate([oc, dc], 1), np.concatenate([ok, dk], 1)])
-    with tempfile.TemporaryDirectory(prefix="bayesgloss-label-") as tmp:
+    with radiance.scratch_folder("label") as tmp:
         octree = radiance.oconv(scene, Path(tmp) / "labels.oct")
         out = radiance.run(
             ["rtrace", "-h-", "-ff", "-om", "-ab", "0", str(octree)],
@@ -710,7 +710,7 @@ def _bundle_dir(cache_dir: Path, config: SequenceConfig) -> Path:
 
 
 def _render_frame(scene_text: str, sky_text: str, rays: np.ndarray, ambient) -> np.ndarray:
-    with tempfile.TemporaryDirectory(prefix="bayesgloss-frame-") as tmp:
+    with radiance.scratch_folder("frame") as tmp:
         octree = radiance.oconv(
             sky_text + radiance.sky_glow(ground=True) + scene_text, Path(tmp) / "frame.oct"
         )

@@ -58,10 +58,13 @@ def _pvalue(path, *options) -> np.ndarray:
 # ---------------------------------------------------------------------------
 
 
-def _facets(rng, n):
+def _facets(rng, n, camera=(-10.0, 0.0, 2.0)):
+    """Random facets, each turned to face ``camera`` (a facet seen from behind is flagged)."""
     normal = rng.normal(size=(n, 3))
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    return Facets(np.arange(1, n + 1), normal, rng.normal(size=(n, 3)))
+    center = rng.normal(size=(n, 3))
+    normal *= np.sign(np.sum((np.asarray(camera) - center) * normal, axis=1, keepdims=True))
+    return Facets(np.arange(1, n + 1), normal, center)
 
 
 def _scene(rng, height=24, width=30, n_facets=6, n_frames=4, noise=0.2):
@@ -1197,6 +1200,92 @@ def test_lower_bound_of_a_facet_saturated_in_every_pixel(tmp_path, statistic):
     assert curves.lower_bound[1, 1] == pytest.approx(1.0, rel=1e-6)
     expected = bd.srgb_to_linear(np.array([255, 128, 255]) / 255) @ WEIGHTS
     assert curves.lower_bound[2, 2] == pytest.approx(expected, rel=1e-6)
+
+
+def test_negative_luminance_flagged_noise_about_zero_kept(tmp_path):
+    # float frames: a facet whose every pixel is negative cannot be a radiance
+    # (issue 17: negative pixels entered as valid data); a facet with a few
+    # negative pixels, as noise about a black level, keeps a positive mean
+    rng = np.random.default_rng(15)
+    facets, labels, frames = _scene(rng)
+    frames[1][labels == 2] *= -1.0
+    few = np.argwhere(labels == 3)[:2]
+    frames[2][few[:, 0], few[:, 1]] = -1e-3
+    path, _ = _write(tmp_path, facets=facets, labels=labels, frames=frames)
+    curves = bd.facet_curves(path)
+    assert curves.flags[1, 1] == "negative-luminance" and curves.luminance[1, 1] < 0
+    assert curves.valid[2, 2] and curves.luminance[2, 2] > 0
+    assert np.count_nonzero(~curves.valid) == 1
+
+
+def test_facets_seen_from_behind_flagged(tmp_path):
+    # the box (sides +x, +y, -x, -y, top) from (10, 0, 0.5): only its +x side faces the camera; the others
+    # are seen from behind or edge-on, so their pixels cannot be theirs
+    path, _ = _object_bundle(tmp_path, BOX, camera=(10.0, 0.0, 0.5))
+    curves = bd.facet_curves(path)
+    assert curves.valid[0].all()
+    for k in range(1, 5):
+        assert set(curves.flags[k]) == {"seen-from-behind"}
+    np.testing.assert_allclose(
+        bd.facing_camera([10.0, 0.0, 0.5], BOX), [9.0, -1.0, -11.0, -1.0, -1.5]
+    )
+
+
+def test_camera_below_the_ground_warns(tmp_path):
+    path, _ = _object_bundle(tmp_path, BOX, camera=(-10.0, 0.0, 2.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bd.read_bundle(path)  # above the ground: no warning
+    _move_camera(path, (-10.0, 0.0, -3.0))
+    with pytest.warns(bd.BundleWarning, match=r"below z = 0 and below every facet centre "):
+        bd.read_bundle(path)
+
+
+def test_one_bit_png_frames_rejected(tmp_path):
+    # a 1-bit PNG decodes to codes 0 and 1 of 255: issue 17 found it gave a
+    # "converged" 0.86. Built from the PNG spec: grey, bit depth 1
+    path, args = _write(tmp_path, frame_format="png8", encoding="srgb")
+    height, width = args["labels"].shape
+    ihdr = struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0)
+    raw = b"".join(b"\x00" + np.packbits(np.ones(width, np.uint8)).tobytes() for _ in range(height))
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw))
+    (path / "frames/f001.png").write_bytes(png + chunk(b"IEND", b""))
+    with pytest.raises(bd.BundleError) as caught:
+        bd.read_bundle(path)
+    assert caught.value.field == "frames[1].file"
+    assert "is a 1-bit PNG; frames need 8 or 16 bits per sample" in caught.value.problem
+
+
+def test_usable_facets_need_measured_entries(tmp_path):
+    path, _ = _write(tmp_path)
+    b = bd.read_bundle(path)
+    usable = np.ones((3, 8), bool)
+    censored = np.zeros((3, 8), bool)
+    censored[0] = True  # every entry a lower bound
+    censored[1, 1:] = True  # one measured
+    censored[2, 2:] = True  # two measured: enough
+    assert bd.usable_facets(b, usable, 4, censored).tolist() == [False, False, True]
+    censored[2] = True
+    with pytest.raises(bd.NoUsableData) as caught:
+        bd.usable_facets(b, usable, 4, censored)
+    assert "23 of 24 usable entries are saturated" in str(caught.value)
+    assert "the best facet has 1 measured, 2 needed: lower the exposure" in str(caught.value)
+
+
+def test_bundle_digest_follows_content(tmp_path):
+    path, args = _write(tmp_path)
+    first = bd.bundle_digest(bd.read_bundle(path))
+    assert bd.bundle_digest(bd.read_bundle(path)) == first  # reading changes nothing
+    frame = path / "frames/f001.tif"
+    bd.write_tiff(frame, args["frames"][1] * 2.0)  # a frame replaced
+    second = bd.bundle_digest(bd.read_bundle(path))
+    assert second != first
+    _edit_manifest(path, lambda m: m.update(ground_reflectance=0.3))
+    assert bd.bundle_digest(bd.read_bundle(path)) not in (first, second)
 
 
 def test_tiny_facets_reported(tmp_path):
