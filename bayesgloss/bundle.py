@@ -596,7 +596,7 @@ def _below_ground_warning(bundle: Any, position: np.ndarray, facets: Facets) -> 
     )
 
 
-def bundle_digest(bundle: "Bundle") -> str:
+def bundle_digest(bundle: Bundle) -> str:
     """SHA-256 (hex) of what a bundle's estimate depends on: the manifest's and
     the label image's bytes, and each frame's (and the mesh's) name, size and
     modification time (ns).

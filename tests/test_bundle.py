@@ -1219,8 +1219,9 @@ def test_negative_luminance_flagged_noise_about_zero_kept(tmp_path):
 
 
 def test_facets_seen_from_behind_flagged(tmp_path):
-    # the box (sides +x, +y, -x, -y, top) from (10, 0, 0.5): only its +x side faces the camera; the others
-    # are seen from behind or edge-on, so their pixels cannot be theirs
+    # the box (sides +x, +y, -x, -y, top) from (10, 0, 0.5): only its +x side
+    # faces the camera; the others are seen from behind or edge-on, so their
+    # pixels cannot be theirs
     path, _ = _object_bundle(tmp_path, BOX, camera=(10.0, 0.0, 0.5))
     curves = bd.facet_curves(path)
     assert curves.valid[0].all()
@@ -1250,7 +1251,9 @@ def test_one_bit_png_frames_rejected(tmp_path):
     raw = b"".join(b"\x00" + np.packbits(np.ones(width, np.uint8)).tobytes() for _ in range(height))
 
     def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw))
     (path / "frames/f001.png").write_bytes(png + chunk(b"IEND", b""))
