@@ -274,17 +274,16 @@ def usable_facets(bundle, usable, min_frames: int, censored=None, min_measured: 
     if not np.any(keep):
         n_up, n_t = int(np.sum(bundle.sun_up)), len(bundle.sun_up)
         best = int(usable.sum(axis=1).max()) if usable.size else 0
-        saturated = ""
-        if censored.any():
-            saturated = (
-                f"; {int(censored.sum())} of {int(usable.sum())} usable entries are saturated "
-                f"(lower bounds only), and the best facet has {int(measured.max())} measured, "
+        if best >= min_frames:  # frames enough, but lower bounds only
+            raise NoUsableData(
+                f"bundle '{bundle.path}': no facet has enough measured frames: "
+                f"{int(censored.sum())} of {int(usable.sum())} usable entries are saturated "
+                f"(lower bounds only), the best facet has {int(measured.max())} measured, "
                 f"{min_measured} needed: lower the exposure"
             )
         raise NoUsableData(
             f"bundle '{bundle.path}': no facet has enough usable frames: {n_up} of {n_t} "
             f"frames have the sun up, the best facet has {best} usable, {min_frames} needed"
-            + saturated
         )
     return keep
 

@@ -285,6 +285,7 @@ def _estimate_many(args, progress) -> int:
 
     from . import bundle as bundle_io
     from . import estimate, runner
+    from .joint_estimate import JOINT_MAX_SWEEPS
 
     if not args.out:
         raise ValueError("several bundles (or --scheduler) need --out DIR for the results")
@@ -308,8 +309,7 @@ def _estimate_many(args, progress) -> int:
                 "noise": args.noise,
                 "camera": args.camera,
                 "seed": args.seed,
-                "max_steps": args.max_steps
-                or (estimate.JOINT_MAX_SWEEPS if args.per_frame else 8000),
+                "max_steps": args.max_steps or (JOINT_MAX_SWEEPS if args.per_frame else 8000),
                 # only where set, so that other runs keep their units' keys
                 **({"per_frame": True} if args.per_frame else {}),
                 "bundle_content": content,

@@ -1275,7 +1275,9 @@ def test_usable_facets_need_measured_entries(tmp_path):
     censored[2] = True
     with pytest.raises(bd.NoUsableData) as caught:
         bd.usable_facets(b, usable, 4, censored)
-    assert "23 of 24 usable entries are saturated" in str(caught.value)
+    assert "no facet has enough measured frames: 23 of 24 usable entries are saturated" in str(
+        caught.value
+    )
     assert "the best facet has 1 measured, 2 needed: lower the exposure" in str(caught.value)
 
 

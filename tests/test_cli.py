@@ -259,3 +259,80 @@ def test_report_of_a_damaged_result_is_one_line(saved_result, tmp_path, capsys, 
     assert cli.main(["report", str(res)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and "Traceback" not in err, err
+
+
+# -- stale or silently wrong (issue 17) -------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["estimate", "compare"])
+def test_every_pixel_saturated_is_one_clear_error(tmp_path, command, capsys):
+    # every entry a lower bound: the estimate once reported a "converged"
+    # 0.29 [0.13, 0.77] with no saturation flag
+    from conftest import make_synthetic_bundle
+
+    b = make_synthetic_bundle(tmp_path / "sat", encoding="srgb", bits=8, exposure=1e-6)
+    assert cli.main([command, str(b), "--quiet"] if command == "estimate" else [command, str(b)])
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err, err
+    assert "no facet has enough measured frames: 120 of 120 usable entries are saturated" in err
+    assert "lower the exposure" in err
+
+
+def test_report_refuses_a_bundle_changed_since_the_estimate(saved_result, tmp_path, capsys):
+    # summary.json records the bundle's resolved path and its content digest;
+    # a bundle rewritten since (or another of the same name) is not drawn silently
+    from bayesgloss import bundle
+
+    summary = json.loads((saved_result / "summary.json").read_text())
+    b = tmp_path / "b"
+    shutil.copytree(summary["bundle"], b)  # keeps the files' times: the same content
+    res = tmp_path / "res"
+    shutil.copytree(saved_result, res)
+    (res / "summary.json").write_text(json.dumps({**summary, "bundle": str(b)}))
+    assert cli.main(["report", str(res), "--out", str(tmp_path / "a.png")]) == 0
+    capsys.readouterr()
+    frame = bundle.read_bundle(b).frame_files[3]
+    pixels, _ = bundle.read_image(frame)
+    bundle.write_tiff(frame, pixels * 1.5)  # a frame replaced
+    assert cli.main(["report", str(res), "--out", str(tmp_path / "b.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "has changed since the estimate" in err, err
+    assert not (tmp_path / "b.png").exists()
+    # named explicitly, the user's choice stands
+    assert cli.main(["report", str(res), "--bundle", str(b), "--out", str(tmp_path / "c.png")]) == 0
+
+
+def test_several_bundles_reuse_results_by_content(odd_bundles, tmp_path, monkeypatch, capsys):
+    # a finished unit is found again by the bundle's content, not its folder
+    # name: replacing a bundle's frames once returned the old answer
+    import concurrent.futures
+    import contextlib
+
+    from bayesgloss import bundle, estimate, runner
+
+    calls = []
+
+    def fake_unit(bundle, **options):  # the estimate's files, cheaply
+        calls.append(Path(bundle).name)
+        g = {"median": 0.5, "q05": 0.4, "q95": 0.6}
+        return {"summary.json": json.dumps({"object": {"gamma": g}}).encode()}
+
+    @contextlib.contextmanager
+    def in_process(jobs, scheduler=None):
+        with concurrent.futures.ThreadPoolExecutor(1) as ex:
+            yield ex
+
+    monkeypatch.setattr(estimate, "estimate_unit", fake_unit)
+    monkeypatch.setattr(runner, "executor", in_process)
+    a, c = tmp_path / "a", tmp_path / "c"
+    shutil.copytree(odd_bundles["day"], a)
+    shutil.copytree(odd_bundles["day"], c)
+    args = ["estimate", str(a), str(c), "--out", str(tmp_path / "out"), "--quiet"]
+    assert cli.main(args) == 0 and sorted(calls) == ["a", "c"]
+    assert cli.main(args) == 0 and sorted(calls) == ["a", "c"]  # both finished: reused
+    frame = bundle.read_bundle(a).frame_files[3]
+    pixels, _ = bundle.read_image(frame)
+    bundle.write_tiff(frame, pixels * 1.5)  # a's frames replaced, same folder name
+    assert cli.main(args) == 0 and sorted(calls) == ["a", "a", "c"]
+    assert len(list((tmp_path / "out").iterdir())) == 3
+    capsys.readouterr()
