@@ -88,14 +88,18 @@ def write_result(path, result: EstimateResult) -> Path:
     name and renamed into place, the summary last: a run killed at any
     moment leaves either no summary (an incomplete result, which
     :func:`read_result` says) or a summary whose netCDF is complete; no file
-    of an older run survives beside a newer one. Other files in the folder
-    are left alone.
+    of an older run survives beside a newer one, and the next run removes
+    the temporary files of a killed one. Other files in the folder are left
+    alone.
     """
 
     out = check_result_folder(path)
     out.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # the summary first: it marks a complete result
         (out / name).unlink(missing_ok=True)
+    for name in RESULT_FILES:  # half-written files of a killed run
+        for tmp in out.glob(f".{name}.*"):
+            tmp.unlink(missing_ok=True)
     for name, data in result_files(result).items():  # the netCDF, then the summary
         fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
         try:

@@ -336,3 +336,88 @@ def test_several_bundles_reuse_results_by_content(odd_bundles, tmp_path, monkeyp
     assert cli.main(args) == 0 and sorted(calls) == ["a", "a", "c"]
     assert len(list((tmp_path / "out").iterdir())) == 3
     capsys.readouterr()
+
+
+# a `bayesgloss estimate --out` whose computation is replaced by a saved result
+# (with a new netCDF: an attribute changed) and which SIGKILLs itself at one point
+# of the write; the CLI's own path from --out check to the files is the real one
+_KILLED_ESTIMATE = """
+import os, signal, sys
+from bayesgloss import cli, estimate, results
+
+saved, bundle, out, point = sys.argv[1:5]
+res = results.read_result(saved)
+res.idata.posterior.attrs["run"] = "newer"
+estimate.estimate_bundle = lambda *a, **k: res
+die = lambda: os.kill(os.getpid(), signal.SIGKILL)
+real_replace, real_fdopen, real_unlink = os.replace, os.fdopen, results.Path.unlink
+if point == "after removing the old files":
+    def unlink(self, *a, **k):
+        real_unlink(self, *a, **k)
+        if self.name == results.RESULT_FILES[-1]:
+            die()
+    results.Path.unlink = unlink
+
+class HalfWritten:  # writes half of what it is given, then dies
+    def __init__(self, f): self.f = f
+    def __enter__(self): return self
+    def __exit__(self, *a): return self.f.__exit__(*a)
+    def write(self, data):
+        self.f.write(data[: len(data) // 2]); self.f.flush(); os.fsync(self.f.fileno()); die()
+
+def fdopen(fd, *a, **k):
+    f = real_fdopen(fd, *a, **k)
+    name = os.readlink(f"/proc/self/fd/{fd}")
+    want = {"during the netCDF write": ".posterior.nc.", "during the summary write": ".summary.json."}
+    return HalfWritten(f) if want.get(point, "//") in name else f
+
+def replace(src, dst):
+    real_replace(src, dst)
+    if point == "after the netCDF write" and str(dst).endswith("posterior.nc"):
+        die()
+
+os.fdopen, os.replace = fdopen, replace
+sys.exit(cli.main(["estimate", bundle, "--out", out, "--quiet"]))
+"""
+
+KILL_POINTS = [
+    "after removing the old files",
+    "during the netCDF write",
+    "after the netCDF write",
+    "during the summary write",
+    "never",
+]
+
+
+@pytest.mark.parametrize("point", KILL_POINTS)
+def test_kill_9_during_estimate_out_leaves_a_result_or_says_it_is_incomplete(
+    saved_result, odd_bundles, tmp_path, capsys, point
+):
+    # the folder holds an older complete result; `kill -9` at each point of the
+    # write leaves either a complete result (report works) or one that report
+    # refuses in one line as incomplete, never an older summary beside a newer
+    # netCDF (a 96-byte posterior.nc beside an older summary.json crashed report)
+    out = tmp_path / "res"
+    shutil.copytree(saved_result, out)
+
+    def estimate_out(point):
+        args = [str(saved_result), str(odd_bundles["day"]), str(out), point]
+        proc = subprocess.run(
+            [sys.executable, "-c", _KILLED_ESTIMATE, *args], capture_output=True, text=True
+        )
+        assert proc.returncode == (0 if point == "never" else -9), proc.stderr
+
+    estimate_out(point)
+    leftovers = sorted(p.name for p in out.iterdir())
+    code = cli.main(["report", str(out), "--out", str(tmp_path / "report.png")])
+    err = capsys.readouterr().err
+    if point != "never":
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+        assert "no summary.json: an incomplete result" in err, err
+        assert "summary.json" not in leftovers  # the older one went first
+        estimate_out("never")  # the next run completes, with nothing of the killed one left
+        code = cli.main(["report", str(out), "--out", str(tmp_path / "report.png")])
+        err = capsys.readouterr().err
+    assert code == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["posterior.nc", "summary.json"]
+    assert b"newer" in (out / "posterior.nc").read_bytes()
