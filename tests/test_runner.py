@@ -12,7 +12,7 @@ import time
 import pytest
 from conftest import make_synthetic_bundle
 
-from bayesgloss import estimate, runner
+from bayesgloss import bundle, estimate, runner
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +35,7 @@ def _units(bundles):
                 "camera": "auto",
                 "seed": 3,
                 "max_steps": 8000,  # the command line's default with --fixed-brightness
+                "bundle_content": bundle.bundle_digest(bundle.read_bundle(b)),
             },
         )
         for b in bundles
