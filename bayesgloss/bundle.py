@@ -611,7 +611,7 @@ def bundle_digest(bundle: Bundle) -> str:
         data = (root / name).read_bytes()
         digest.update(f"{name}\0{len(data)}\0".encode())
         digest.update(data)
-    mesh = bundle.manifest.get("object_mesh") if isinstance(bundle.manifest, dict) else None
+    mesh = bundle.manifest.get("object_mesh")  # a dict: the reader rejects any other
     for file in (*bundle.frame_files, *([root / mesh] if mesh else [])):
         st = Path(file).stat()
         name = os.path.relpath(Path(file).resolve(), root)

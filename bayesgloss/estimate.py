@@ -415,12 +415,17 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
 
     gam = idata.posterior["gamma"].values  # (E, S, F)
     per_facet = gam.transpose(2, 0, 1).reshape(len(ids), -1)
+    _, usable, censored = observations(curves)
+    # kept facets whose usable entries are mostly lower bounds
+    mostly_saturated = censored[keep].sum(1) > 0.5 * usable[keep].sum(1)
     facets = []
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
         gq = _quantiles(per_facet[k])
         if gq["q95"] - gq["q05"] > NOT_IDENTIFIABLE_WIDTH:
             flags.append("gloss-not-identifiable")
+        if mostly_saturated[k]:
+            flags.append("mostly-saturated")
         facets.append(
             {
                 "id": int(fid),
@@ -433,7 +438,6 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
                 "flags": flags,
             }
         )
-    _, usable, censored = observations(curves)
     for k in np.flatnonzero(~keep):
         short = usable[k].sum() < MIN_FRAMES  # else too few measured: saturated
         facets.append(
@@ -444,9 +448,6 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
                 "flags": ["too-few-frames" if short else "saturated"],
             }
         )
-    for k, f in zip(np.flatnonzero(keep), facets, strict=False):
-        if censored[k].sum() > 0.5 * usable[k].sum():  # mostly lower bounds
-            f["flags"].append("mostly-saturated")
     conv = diag["converged"]
     use = conv if conv.sum() >= 2 else np.ones(len(conv), dtype=bool)
     pop = population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)

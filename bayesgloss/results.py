@@ -97,8 +97,7 @@ def write_result(path, result: EstimateResult) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # the summary first: it marks a complete result
         (out / name).unlink(missing_ok=True)
-    for name in RESULT_FILES:  # half-written files of a killed run
-        for tmp in out.glob(f".{name}.*"):
+        for tmp in out.glob(f".{name}.*"):  # and the half-written files of a killed run
             tmp.unlink(missing_ok=True)
     for name, data in result_files(result).items():  # the netCDF, then the summary
         fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)

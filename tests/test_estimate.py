@@ -360,3 +360,31 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     back = estimate.read_result(tmp_path / "out")
     png = report.posterior_report(b, back, path=tmp_path / "out" / "report.png")
     assert png.stat().st_size > 10_000
+
+
+def test_mostly_saturated_facets_and_object_are_flagged(tmp_path):
+    # an exposure at which most sun-up entries clip: every facet whose usable
+    # entries are mostly lower bounds (saturated) is flagged, and so is the
+    # object when most entries over the facets used are; the others are not
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import bundle
+
+    curves = bundle.facet_curves(make_synthetic_bundle(tmp_path / "float"))
+    up = curves.luminance[:, bundle.read_bundle(tmp_path / "float").sun_up]
+    # radiance at the top code: the 40th percentile of the sun-up luminances
+    # (grey, so luminance = 179 x radiance)
+    top = np.quantile(up, 0.4) / 179.0
+    path = make_synthetic_bundle(tmp_path / "clipped", encoding="linear", exposure=top)
+    y, usable, censored = estimate.observations(bundle.facet_curves(path))
+    fraction = censored.sum(1) / usable.sum(1)
+    assert (fraction > 0.5).any() and (fraction <= 0.5).any()  # both kinds present
+    res = estimate.estimate_bundle(path, per_frame=False, sampler_options={"max_steps": 100})
+    flagged = {f["id"]: "mostly-saturated" in f["flags"] for f in res.summary["facets"]}
+    keep = (usable.sum(1) >= estimate.MIN_FRAMES) & ((usable & ~censored).sum(1) >= 2)
+    ids = bundle.read_bundle(path).facets.ids
+    for fid, k, frac in zip(ids, keep, fraction, strict=True):
+        if k:
+            assert flagged[fid] == (frac > 0.5), (fid, frac)
+    overall = censored[keep].sum() / usable[keep].sum()
+    assert ("mostly-saturated" in res.summary["object"]["flags"]) == (overall > 0.5), overall
