@@ -53,7 +53,12 @@ log e_t ~ N(0, 2^2) where the exposure is unknown. The one-material model
 (N(-9, 2^2): below the noise of any curve) and lets the day choose the
 three components' weights (uniform on the simplex), so that a day whose
 every frame is overcast is as plausible a priori as a clear one
-(:func:`log_prior_frames` with ``log_sun_weights``).
+(:func:`log_prior_frames` with ``log_sun_weights``). With ``point_mass``,
+the hidden component is instead a point mass at a_t = 0 (log a_t = -inf: no
+direct light at all), the model of the Hamiltonian sampler
+(:mod:`bayesgloss.sampling.hamiltonian`): the normal one's posterior is
+pressed against the wall where the sun begins to show in the most precise
+facet's curve, whose curvature grows as a^2.
 The facets' priors are those of :class:`bayesgloss.likelihood.Priors`.
 """
 
@@ -473,13 +478,14 @@ def log_sun_weights(hyper) -> np.ndarray:
     return v - _logsumexp_last(v)
 
 
-def log_prior_frames(lam, data: JointData, log_sun_weights=None) -> np.ndarray:
+def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=False) -> np.ndarray:
     """Log prior of each frame's latents, (..., T) for lam (..., T, L) (module docstring).
 
     ``log_sun_weights`` (..., 3): the log weights of the sun's clear, dimmed
     and hidden components for the day (the one-material model's day-level
     sun state, :mod:`bayesgloss.sampling.material`); None: the fixed
-    two-part mixture (clear 0.8, dimmed 0.2).
+    two-part mixture (clear 0.8, dimmed 0.2). ``point_mass``: the hidden
+    component is a = 0, log a = -inf (its log prior its weight's).
     """
     q = data.frame_priors
     log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
@@ -490,10 +496,15 @@ def log_prior_frames(lam, data: JointData, log_sun_weights=None) -> np.ndarray:
             clear + np.log1p(-q.sun_cloud_weight), cloud + np.log(q.sun_cloud_weight)
         )
     else:
-        hidden = -0.5 * ((log_a - q.sun_hidden_mean) / q.sun_hidden_sd) ** 2
-        hidden -= np.log(q.sun_hidden_sd)
         w = np.asarray(log_sun_weights)[..., None, :]
-        sun = _logsumexp_last(np.stack([clear, cloud, hidden], -1) + w)[..., 0]
+        if point_mass:
+            seen = _logsumexp_last(np.stack([clear, cloud], -1) + w[..., :2])[..., 0]
+            gone = np.isneginf(log_a)
+            sun = np.where(gone, np.broadcast_to(w[..., 2], gone.shape), seen)
+        else:
+            hidden = -0.5 * ((log_a - q.sun_hidden_mean) / q.sun_hidden_sd) ** 2
+            hidden -= np.log(q.sun_hidden_sd)
+            sun = _logsumexp_last(np.stack([clear, cloud, hidden], -1) + w)[..., 0]
     lp = sun - 0.5 * (log_b / q.sky_sd) ** 2
     if data.shapes >= 2:  # w uniform on the simplex: sum_k log w_k in the u coordinates
         lp = lp + np.sum(log_shape_weights(lam), axis=-1)
@@ -635,11 +646,14 @@ def sample_prior(data: JointData, size: int, rng: np.random.Generator):
     return th, lam
 
 
-def sample_prior_material(data: JointData, size: int, rng: np.random.Generator):
+def sample_prior_material(
+    data: JointData, size: int, rng: np.random.Generator, point_mass: bool = False
+):
     """Draws from the one-material model's prior (:func:`log_prior_material`):
     theta (F, size, 4) (gamma and log n shared, log sigma per facet log-uniform),
     hyper (size, 4) and lam (size, T, L), each frame's sun from the day's
-    three-part mixture."""
+    three-part mixture (``point_mass``: a hidden sun log a = -inf, as
+    :func:`log_prior_frames`)."""
     p, q = data.priors, data.frame_priors
     f, t = data.shape
     th, lam = sample_prior(data, size, rng)
@@ -652,7 +666,8 @@ def sample_prior_material(data: JointData, size: int, rng: np.random.Generator):
     weights = rng.dirichlet(np.ones(3), size=size)  # clear, dimmed, hidden
     hyper[:, 2:] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
     state = (rng.random((size, t, 1)) > np.cumsum(weights, axis=1)[:, None, :]).sum(-1)
-    means = np.array([0.0, q.sun_cloud_mean, q.sun_hidden_mean])
+    hidden_mean = -np.inf if point_mass else q.sun_hidden_mean
+    means = np.array([0.0, q.sun_cloud_mean, hidden_mean])
     sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])
     lam[..., 1] = means[state] + sds[state] * rng.standard_normal((size, t))
     return th, hyper, lam
