@@ -26,7 +26,11 @@ runs one problem at a time and its per-step overhead dominates for a
 - :mod:`~bayesgloss.sampling.material`: :func:`sample_material`, the same
   scheme for the one-material model (shared gamma and n, hierarchical
   albedo: the object's answer), and :func:`facets_given_frames`, each
-  facet's own posterior given the object's illumination.
+  facet's own posterior given the object's illumination;
+- :mod:`~bayesgloss.sampling.material_density` and
+  :mod:`~bayesgloss.sampling.hamiltonian`: the one-material model's density
+  and gradient in unconstrained coordinates, and Hamiltonian Monte Carlo of
+  it (:func:`sample_material_hmc`; not yet the default, see its module).
 
 Autocorrelation times, R-hat, ESS and the convergence rule live in
 :mod:`bayesgloss.diagnostics`. On the paper's facets the median integrated

@@ -1,4 +1,5 @@
-"""Hamiltonian Monte Carlo of the one-material model (bayesgloss.sampling.hamiltonian)."""
+"""The one-material model's density, gradient and hidden-sun step
+(bayesgloss.sampling.material_density)."""
 
 import dataclasses
 
@@ -7,7 +8,7 @@ import pytest
 
 from bayesgloss import illumination as il
 from bayesgloss import likelihood as lk
-from bayesgloss.sampling import hamiltonian as hm
+from bayesgloss.sampling import material_density as hm
 
 
 def _object(paper_three_skies, exposure_known=True, shapes=3, seed=1, sigma=0.02):
