@@ -127,15 +127,10 @@ class _DualAveraging:
         return float(np.exp(self.log_bar))
 
 
-def _transition(z, lp, gz, chol, center, step, n_leap, data, lay, hidden, pseudo, rng):
-    """One HMC iteration of every chain in whitened coordinates z (C, D)
-    (x = center + z chol^T), the hidden suns fixed: (z, lp, grad_z,
-    acceptance probability (C,))."""
-
-    def density(zz):
-        value, gx = log_density_and_gradient(center + zz @ chol.T, data, lay, hidden, pseudo)
-        return value, gx @ chol
-
+def _transition(z, lp, gz, density, step, n_leap, rng):
+    """One HMC iteration of every chain in whitened coordinates z (C, D),
+    ``density(z)`` the log density and its gradient in z (the hidden suns
+    fixed): (z, lp, grad_z, acceptance probability (C,))."""
     p = rng.standard_normal(z.shape)
     h0 = lp - 0.5 * np.sum(p * p, -1)
     zn, gn = z.copy(), gz.copy()
@@ -248,10 +243,11 @@ def sample_material_hmc(
         ``draws`` (F, C, S, 4): gamma and log n shared, each facet's log s
         and log sigma; ``frames`` (C, S, T, L); ``material`` (C, S, 4): m,
         log tau, the day's sun weights v; ``rhat``, ``ess_bulk``,
-        ``ess_tail`` of gamma, then every frame's log a, then log b; the
-        rule also covers the log posterior (``acceptance["lp_rhat"]``);
-        ``acceptance`` holds the mean acceptance probability, the step size
-        and leapfrog steps per iteration.
+        ``ess_tail`` of gamma, then every frame's sun a (0 where hidden),
+        then log b; the rule also covers the log posterior
+        (``acceptance["lp_rhat"]``); ``acceptance`` holds the mean
+        acceptance probability, the step size, the mean leapfrog steps per
+        iteration (after the warm-up) and the warm-up's iterations.
     """
     if n_chains < 2:
         raise ValueError(f"need at least 2 chains, got {n_chains}")
@@ -276,7 +272,7 @@ def sample_material_hmc(
     z = whiten(x)
     lp, gz = evaluate(z)
     adapt = _DualAveraging(0.1)
-    accepted = []
+    accepted, steps = [], []
     iteration = 0
 
     def leapfrogs(step):
@@ -289,15 +285,17 @@ def sample_material_hmc(
         nonlocal z, lp, gz, iteration, hidden
         for _ in range(n_iter):
             step = (adapt.step if adapting else adapt.final) * rng.uniform(0.9, 1.1)
-            z, lp, gz, prob = _transition(
-                z, lp, gz, chol, center, step, leapfrogs(step), data, lay, hidden, pseudo, rng
-            )
-            hidden = hidden_step(center + z @ chol.T, hidden, data, lay, rng, pseudo)
-            lp, gz = evaluate(z)
+            n_leap = leapfrogs(step)
+            z, lp, gz, prob = _transition(z, lp, gz, evaluate, step, n_leap, rng)
+            new = hidden_step(center + z @ chol.T, hidden, data, lay, rng, pseudo)
+            if not np.array_equal(new, hidden):  # the density changed with them
+                hidden = new
+                lp, gz = evaluate(z)
             if adapting:
                 adapt.update(float(np.mean(prob)))
             else:
                 accepted.append(float(np.mean(prob)))
+                steps.append(n_leap)
             if keep is not None:
                 keep.append((center + z @ chol.T, hidden.copy()))
             iteration += 1
@@ -306,23 +304,20 @@ def sample_material_hmc(
     for k, length in enumerate(WARMUP_WINDOWS):
         window = []
         run(length, True, window)
-        if k >= 1 or length >= 50:
-            part = window[len(window) // 2 :] if k == 0 else window
-            xs = np.stack([w for w, _ in part])
-            hs = np.stack([h for _, h in part])
-            pseudo = _pseudo_prior(xs[..., a_index], hs, pseudo)
-            # a hidden sun's log a is its pseudo-prior's draw: drawn anew
-            # from the new one, in the window (for the metric) and the state
-            xs[..., a_index] = np.where(hs, _draw(pseudo, hs.shape, rng), xs[..., a_index])
-            new_chol = _metric(xs, chol)
-            x_now = center + z @ chol.T
-            x_now[:, a_index] = np.where(
-                hidden, _draw(pseudo, hidden.shape, rng), x_now[:, a_index]
-            )
-            center, chol = xs.reshape(-1, lay.size).mean(0), new_chol
-            z = whiten(x_now)
-            lp, gz = evaluate(z)
-            adapt.restart(adapt.final)
+        part = window[len(window) // 2 :] if k == 0 else window  # the first: after its start
+        xs = np.stack([w for w, _ in part])
+        hs = np.stack([h for _, h in part])
+        pseudo = _pseudo_prior(xs[..., a_index], hs, pseudo)
+        # a hidden sun's log a is its pseudo-prior's draw: drawn anew from
+        # the new one, in the window (for the metric) and in the state
+        xs[..., a_index] = np.where(hs, _draw(pseudo, hs.shape, rng), xs[..., a_index])
+        new_chol = _metric(xs, chol)
+        x_now = center + z @ chol.T
+        x_now[:, a_index] = np.where(hidden, _draw(pseudo, hidden.shape, rng), x_now[:, a_index])
+        center, chol = xs.reshape(-1, lay.size).mean(0), new_chol
+        z = whiten(x_now)
+        lp, gz = evaluate(z)
+        adapt.restart(adapt.final)
     run(WARMUP_TAIL, True)
     warmup = iteration
 
@@ -359,7 +354,7 @@ def sample_material_hmc(
         {
             "hmc": float(np.mean(accepted)) if accepted else float("nan"),
             "step": adapt.final,
-            "leapfrog": TRAJECTORY / adapt.final,
+            "leapfrog": float(np.mean(steps)) if steps else float("nan"),
             "warmup": warmup,
             "lp_rhat": lp_rhat,
         },

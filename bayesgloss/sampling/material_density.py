@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import illumination as il
+from .. import likelihood as lk
 from .joint import starting_frames
 
 __all__ = [
@@ -122,11 +123,17 @@ def natural(state, lay: Layout, data: il.JointData):
     th[..., 3] = _bounded(state[:, lay.log_sigma], lay.bounds["log_sigma"])[0]
     hyper = state[:, lay.hyper].copy()
     hyper[:, 1] = _bounded(hyper[:, 1], lay.bounds["log_tau"])[0]
-    lam = np.zeros((c, lay.t, len(lay.free)))
-    lam[..., lay.free] = state[:, lay.frames].reshape(c, lay.t, lay.k)
+    return th, hyper, _frame_latents(state, lay, data)
+
+
+def _frame_latents(state, lay: Layout, data: il.JointData):
+    """Each frame's latents of states (C, D), (C, T, L): the free ones from
+    the state, a known exposure from the data (other fixed slots 0)."""
+    lam = np.zeros((state.shape[0], lay.t, len(lay.free)))
+    lam[..., lay.free] = state[:, lay.frames].reshape(state.shape[0], lay.t, lay.k)
     if data.exposure_known:
         lam[..., 0] = data.log_exposure
-    return th, hyper, lam
+    return lam
 
 
 def state_of(th, hyper, lam, lay: Layout):
@@ -152,17 +159,15 @@ def _model(state, data: il.JointData, lay: Layout):
     out["gamma"] = _bounded(state[:, 0], lay.bounds["gamma"])
     out["log_n"] = _bounded(state[:, 1], lay.bounds["log_n"])
     out["log_sigma"] = _bounded(state[:, lay.log_sigma], lay.bounds["log_sigma"])
-    lam = np.zeros((c, t, len(lay.free)))
-    lam[..., lay.free] = state[:, lay.frames].reshape(c, t, lay.k)
-    log_e = np.broadcast_to(data.log_exposure, (c, t)) if data.exposure_known else lam[..., 0]
+    lam = _frame_latents(state, lay, data)
+    log_e = lam[..., 0]
     shapes = data.shapes
     sources = 1 + shapes if shapes >= 2 else 2
     gamma = out["gamma"][0]
     grid = data.log_n_grid
     h = grid[1] - grid[0]
-    pos = np.clip((out["log_n"][0] - grid[0]) / h, 0.0, len(grid) - 1.000001)
-    j = pos.astype(np.intp)
-    w = (pos - j)[:, None, None, None]
+    j, w = lk.grid_position(out["log_n"][0], grid)
+    w = w[:, None, None, None]
     g_lo = np.moveaxis(data.glossy[:sources][:, :, j, :], 2, 0)  # (C, P, F, T)
     g_hi = np.moveaxis(data.glossy[:sources][:, :, j + 1, :], 2, 0)
     d = data.diffuse[:sources][None]
@@ -172,10 +177,7 @@ def _model(state, data: il.JointData, lay: Layout):
     out["du_dlogn"] = gam * (g_hi - g_lo) / h
     unit = d + gam * out["du_dgamma"]
     if shapes >= 2:
-        u = np.concatenate([np.zeros((c, t, 1)), lam[..., 3 : 3 + shapes - 1]], -1)
-        u = u - u.max(-1, keepdims=True)
-        shape_w = np.exp(u)
-        shape_w /= shape_w.sum(-1, keepdims=True)  # (C, T, K)
+        shape_w = np.exp(il.log_shape_weights(lam))  # (C, T, K)
     else:
         shape_w = np.ones((c, t, 1))
     with np.errstate(over="ignore"):
@@ -204,18 +206,17 @@ def _entry_log_likelihood(mu, log_sigma, data: il.JointData):
     return ll, g_mu, z * z * inv_var
 
 
-def _sun_components(log_a, v, hidden, q, pseudo=None):
+def _sun_components(log_a, hyper, hidden, q, pseudo=None):
     """Each frame's sun prior by component, (C, T, 3), given the day's weights
-    (softmax of (0, v)): clear and dimmed where the sun shows, and where it
-    is hidden the hidden weight with the pseudo-prior of log a (``pseudo``,
-    each frame's mean and sd, (T,) each; None: the dimmed component's
-    normal): log a is then a coordinate the likelihood ignores (Carlin &
-    Chib 1995, "Bayesian model choice via Markov chain Monte Carlo", JRSS B
-    57); -inf for the components the frame is not in; and the means and
-    sds of log a by component, (T, 3) each, and the day's log weights."""
-    c = v.shape[0]
-    vv3 = np.concatenate([np.zeros((c, 1)), v], -1)
-    log_day = vv3 - np.logaddexp.reduce(vv3, axis=-1, keepdims=True)  # (C, 3)
+    (:func:`~bayesgloss.illumination.log_sun_weights` of ``hyper``): clear
+    and dimmed where the sun shows, and where it is hidden the hidden
+    weight with the pseudo-prior of log a (``pseudo``, each frame's mean
+    and sd, (T,) each; None: the dimmed component's normal): log a is then
+    a coordinate the likelihood ignores (Carlin & Chib 1995, "Bayesian
+    model choice via Markov chain Monte Carlo", JRSS B 57); -inf for the
+    components the frame is not in; and the means and sds of log a by
+    component, (T, 3) each, and the day's log weights."""
+    log_day = il.log_sun_weights(hyper)  # (C, 3)
     t = log_a.shape[-1]
     if pseudo is None:
         pseudo = (np.full(t, q.sun_cloud_mean), np.full(t, q.sun_cloud_sd))
@@ -266,14 +267,14 @@ def log_density_and_gradient(state, data: il.JointData, lay: Layout, hidden=None
     # priors
     log_s = state[:, lay.log_s]
     o = lay.hyper.start
-    m, v = state[:, o], state[:, o + 2 : o + 4]
+    m = state[:, o]
     log_tau, dlt, jt, djt = _bounded(state[:, o + 1], lay.bounds["log_tau"])
     tau2 = np.exp(2 * log_tau)
     dev = log_s - m[:, None]
     c0 = il.material_m_center(data)
     lp = -0.5 * np.sum(dev**2, 1) / tau2 - f * log_tau
     lp -= 0.5 * ((m - c0) / il.MATERIAL_M_SD) ** 2
-    comp, means, sds, log_day = _sun_components(log_a, v, hidden, q, pseudo)
+    comp, means, sds, log_day = _sun_components(log_a, state[:, lay.hyper], hidden, q, pseudo)
     lp += log_day.sum(-1)  # Dirichlet(1, 1, 1) in the log-ratio coordinates
     top = comp.max(-1, keepdims=True)
     resp = np.exp(comp - top)
@@ -332,17 +333,15 @@ def hidden_step(state, hidden, data: il.JointData, lay: Layout, rng, pseudo=None
     mu_sky = parts[:, 1:].sum(1)
     ll_shown = _entry_log_likelihood(mu_sky + parts[:, 0], log_sigma, data)[0].sum(1)  # (C, T)
     ll_hidden = _entry_log_likelihood(mu_sky, log_sigma, data)[0].sum(1)
-    o = lay.hyper.start
     q = data.frame_priors
-    log_a, v = mod["lam"][..., 1], state[:, o + 2 : o + 4]
-    shown_c = _sun_components(log_a, v, np.zeros((c, t), bool), q, pseudo)[0]
-    hidden_c = _sun_components(log_a, v, np.ones((c, t), bool), q, pseudo)[0]
+    log_a, hyper = mod["lam"][..., 1], state[:, lay.hyper]
+    shown_c = _sun_components(log_a, hyper, np.zeros((c, t), bool), q, pseudo)[0]
+    hidden_c = _sun_components(log_a, hyper, np.ones((c, t), bool), q, pseudo)[0]
     p_shown = np.logaddexp(shown_c[..., 0], shown_c[..., 1]) + ll_shown
     p_hidden = hidden_c[..., 2] + ll_hidden
     with np.errstate(invalid="ignore", over="ignore"):
         prob_hidden = 1.0 / (1.0 + np.exp(np.clip(p_shown - p_hidden, -700, 700)))
     prob_hidden = np.where(np.isfinite(p_shown) | np.isfinite(p_hidden), prob_hidden, 0.0)
-    prob_hidden = np.where(np.isnan(prob_hidden), hidden, prob_hidden)
     return rng.random((c, t)) < prob_hidden
 
 
