@@ -40,7 +40,8 @@ products, and frames are independent given sigma). sigma_f is integrated
 out exactly under its log-uniform prior for the facet moves
 (:func:`log_likelihood_sigma_marginal`, the formula of
 :func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`) and drawn from
-its conditional for the frame moves.
+its conditional for the frame moves. The one-material model has one sigma
+for all facets (:func:`log_likelihood_shared_sigma`).
 
 Priors (:class:`IlluminationPriors`): log a_t a two-part mixture, a clear
 sun near the model's (weight 0.8, N(0, 0.35^2): haze and the model's
@@ -66,6 +67,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -93,6 +95,8 @@ __all__ = [
     "frame_weights",
     "predict",
     "log_likelihood_sigma_marginal",
+    "log_likelihood_shared_sigma",
+    "draw_shared_log_sigma",
     "frame_log_likelihood",
     "pointwise_log_likelihood",
     "sample_prior",
@@ -602,6 +606,54 @@ def log_likelihood_sigma_marginal(theta, lam, data: JointData, parts=None, with_
     return (ll, q) if with_q else ll
 
 
+def log_likelihood_shared_sigma(theta, lam, data: JointData, parts=None, with_q=False):
+    """The one-material model's log likelihood with one sigma for all facets
+    integrated out, (E, W).
+
+    The closed form of :func:`log_likelihood_sigma_marginal` with Q and k
+    summed over the facets. Why one sigma: with a sigma for each facet under
+    its log-uniform prior, the marginal likelihood grows as Q_f^(-T/2) as a
+    facet's residuals shrink, which the frames' four free latents can make
+    them do for any one facet at a time (12 frames, 48 latents, 12 numbers to
+    fit): the gain in density matches the loss of volume down to the prior's
+    1e-4, so the posterior held ridges where one facet or another was fitted
+    exactly, and the sampler's walkers each sat on their own (gamma's R-hat
+    over walkers 2-10 on 24-facet, 12-frame prior draws; one sigma, no facet
+    can be fitted alone). With ``with_q``, also each facet's Q (E, F, W).
+    """
+    la, lb = data.priors.log_sigma
+    z, log_v = _residuals(predict(theta, lam, data, parts), data)
+    q_f = np.sum(z * z, axis=-1)
+    q = np.maximum(q_f.sum(axis=1), 1e-300)
+    k = 0.5 * float(data.valid.sum())
+    if k == 0:  # no observation: the likelihood is flat
+        return (np.zeros(q.shape), q_f) if with_q else np.zeros(q.shape)
+    const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
+    cuts = tuple(np.full(q.shape, c) for c in tail_cuts(np.float64(k)))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        log_int = log_gamma_interval(
+            np.full(q.shape, k), q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), cuts
+        )
+        ll = const - log_v.sum(axis=(1, -1)) - k * np.log(q) + log_int
+    ll = np.where(np.isnan(ll), -np.inf, ll)
+    return (ll, q_f) if with_q else ll
+
+
+def draw_shared_log_sigma(q, data: JointData, rng: np.random.Generator) -> np.ndarray:
+    """The one sigma of :func:`log_likelihood_shared_sigma` from its
+    conditional given each facet's Q (E, F, W), the same for every facet, (E,
+    F, W) (:func:`bayesgloss.likelihood.draw_log_sigma` with Q and the
+    frames counted over all facets)."""
+    e, f, w = q.shape
+    total = np.maximum(q.sum(axis=1), 1e-300).reshape(1, -1)
+    pooled = _PooledCurves(data.priors, data.valid.reshape(1, -1))
+    ls = lk.draw_log_sigma(np.zeros((1, e * w, 3)), pooled, rng, q=total).reshape(e, 1, w)
+    return np.broadcast_to(ls, q.shape).copy()
+
+
+_PooledCurves = namedtuple("_PooledCurves", "priors valid")
+
+
 def frame_log_likelihood(theta, lam, log_sigma, data: JointData, parts) -> np.ndarray:
     """Log likelihood of each frame given every facet's sigma, (E, W, T), up to
     a constant (sum over facets of -z^2 / 2 - log(mu + c))."""
@@ -650,7 +702,7 @@ def sample_prior_material(
     data: JointData, size: int, rng: np.random.Generator, point_mass: bool = False
 ):
     """Draws from the one-material model's prior (:func:`log_prior_material`):
-    theta (F, size, 4) (gamma and log n shared, log sigma per facet log-uniform),
+    theta (F, size, 4) (gamma, log n and log sigma shared, sigma log-uniform),
     hyper (size, 4) and lam (size, T, L), each frame's sun from the day's
     three-part mixture (``point_mass``: a hidden sun log a = -inf, as
     :func:`log_prior_frames`)."""
@@ -663,6 +715,7 @@ def sample_prior_material(
     hyper[:, 0] = material_m_center(data) + MATERIAL_M_SD * rng.standard_normal(size)
     hyper[:, 1] = rng.uniform(*MATERIAL_LOG_TAU, size)
     th[..., 2] = hyper[None, :, 0] + np.exp(hyper[None, :, 1]) * rng.standard_normal((f, size))
+    th[..., 3] = rng.uniform(*p.log_sigma, size)[None, :]  # one sigma for all facets
     weights = rng.dirichlet(np.ones(3), size=size)  # clear, dimmed, hidden
     hyper[:, 2:] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
     state = (rng.random((size, t, 1)) > np.cumsum(weights, axis=1)[:, None, :]).sum(-1)

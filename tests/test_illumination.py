@@ -205,3 +205,42 @@ def test_joint_model_sbc(paper_split):
         counts = np.bincount(ranks[:, k] * 10 // 100, minlength=10)
         p = stats.chisquare(counts).pvalue
         assert p > 1e-3, (name, counts)
+
+
+def test_shared_sigma_marginal_is_the_integral_over_one_sigma(paper_split):
+    # the one-material model's likelihood with one sigma for all facets: the
+    # closed form against a quadrature over log sigma of the product of the
+    # facets' normal likelihoods under the log-uniform prior; a per-facet
+    # marginal (the sum over facets of their own integrals) differs by nats
+    full, _, up = paper_split
+    rng = np.random.default_rng(3)
+    bases = full.take(np.arange(5), np.flatnonzero(up)[::3])
+    f, t = bases.diffuse.shape[1:]
+    valid = np.ones((f, t), bool)
+    valid[1, 2] = False
+    ref = il.joint_data(np.ones((f, t)), valid, bases, exposure=np.ones(t))
+    th = np.zeros((1, f, 1, 4))
+    th[..., 0], th[..., 1], th[..., 2], th[..., 3] = 0.4, np.log(50.0), 0.0, np.log(0.05)
+    lam = np.zeros((1, 1, t, ref.n_latents))
+    y = il.simulate(th, lam, ref, rng)[0, :, 0]
+    data = il.joint_data(y, valid, bases, exposure=np.ones(t))
+    th[..., 0] = 0.3  # away from the truth, so that Q is not the noise's alone
+    ll = il.log_likelihood_shared_sigma(th, lam, data)[0, 0]
+    la, lb = data.priors.log_sigma
+    grid = np.linspace(la, lb, 200001)
+    point = th.repeat(1, axis=0)
+    z, log_v = il._residuals(il.predict(th, lam, data), data)
+    q, sum_log_v, n = np.sum(z * z), log_v.sum(), valid.sum()
+    logl = -0.5 * q * np.exp(-2 * grid) - n * grid - sum_log_v - 0.5 * n * np.log(2 * np.pi)
+    peak = logl.max()
+    integral = peak + np.log(np.trapezoid(np.exp(logl - peak), grid) / (lb - la))
+    assert abs(ll - integral) < 1e-6
+    per_facet = il.log_likelihood_sigma_marginal(point, lam, data)[0, :, 0].sum()
+    assert abs(per_facet - ll) > 1.0
+    # and the draw of that sigma is its conditional: mean of sigma^-2 is 2k / Q
+    _, q_f = il.log_likelihood_shared_sigma(th, lam, data, with_q=True)
+    draws = il.draw_shared_log_sigma(np.repeat(q_f, 4000, axis=2), data, rng)
+    assert np.all(draws[:, 0] == draws[:, -1])  # the same for every facet
+    inv_var = np.exp(-2 * draws[0, 0])
+    # Gamma(k, rate Q / 2): sd of the mean of 4000 is sqrt(k) / (Q / 2) / 63
+    assert abs(inv_var.mean() - n / q) < 4 * np.sqrt(n / 2) / (q / 2) / np.sqrt(4000)

@@ -605,7 +605,7 @@ def run_chain(
     # log sigma from its conditional at every draw
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
     _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
-    ls = _log_sigma_draws(q, data.curve_data(), rng)  # (E, F, S)
+    ls = chain._draw_log_sigma(q)  # (E, F, S), the chain's own noise model
     draws = np.concatenate([draws3, ls.transpose(1, 0, 2)[..., None]], axis=-1)
     sweeps = max(chain.sweeps, 1)
     return JointSamples(

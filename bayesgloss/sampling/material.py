@@ -8,7 +8,11 @@ units) drawn from one population,
     log s_f ~ N(m, tau^2),   m ~ N(median_f log s0_f, 3^2),   log tau ~ U(log 0.01, log 3),
 
 with each frame's latents (sun, sky, sky shape, exposure) those of
-:mod:`bayesgloss.illumination` (:func:`bayesgloss.illumination.log_prior_material`).
+:mod:`bayesgloss.illumination` (:func:`bayesgloss.illumination.log_prior_material`)
+and one relative noise sigma for all facets, integrated out
+(:func:`bayesgloss.illumination.log_likelihood_shared_sigma`, which says
+why: a sigma for each facet let the frames fit one facet at a time exactly,
+and the walkers jammed on those ridges).
 Facets whose brightness differs for a reason the model does not know (a
 patch of another paint, a shadow the geometry misses) widen tau instead of
 bending gamma. Where the data cannot tell gloss (no direct sun), one albedo
@@ -31,7 +35,7 @@ whole state) with these blocks per sweep:
    simulated overcast day; carrying the frames too raised the effective
    sample size of gamma per sweep 3.6 times on a clear day and 4 times on a
    broken-cloud one);
-2. **sigma given the rest**, drawn and later discarded (partially collapsed
+2. **the one sigma given the rest**, drawn and later discarded (partially collapsed
    Gibbs, as in the joint sampler);
 3. **each facet's log s given sigma, m and tau**: random-walk Metropolis,
    facets independent, steps from the Fisher information at the data;
@@ -137,7 +141,7 @@ class _MaterialChain(_JointChain):
         def scales(a, b):  # each facet's least-squares scale given the frames
             unit = a[:, None] * sun + b[:, None] * sky
             s = np.sum(w * y * unit, -1) / np.maximum(np.sum(w * unit * unit, -1), 1e-300)
-            return np.maximum(s, 1e-300)
+            return _robust_scales(s, axis=1)
 
         a = np.ones(lam.shape[:-1])
         b = np.ones(lam.shape[:-1])
@@ -163,14 +167,14 @@ class _MaterialChain(_JointChain):
         """log p(gamma, n, s, frames | m, tau, sun weights), sigma integrated
         out, (E, H), for theta's :func:`~bayesgloss.illumination.unit_parts` ``parts``."""
         lp = il.log_prior_material(th, hyper, self.data)
-        ll = il.log_likelihood_sigma_marginal(th, lam, self.data, parts).sum(1)
+        ll = il.log_likelihood_shared_sigma(th, lam, self.data, parts)
         lp = lp + self._frame_prior(lam, hyper=hyper).sum(-1)
         return np.where(np.isfinite(lp), lp + ll, -np.inf)
 
     def _shared_step(self) -> tuple:
-        """The ensemble moves on (gamma, log n), every facet's log s and every
-        frame's log a and log b carried along their joint least-squares
-        profile (:meth:`_profile`): x' = x + x^(gamma', n') - x^(gamma, n)
+        """The ensemble moves on (gamma, log n), half the sweeps with every
+        facet's log s and every frame's log a and log b carried along their
+        joint least-squares profile (:meth:`_profile`): x' = x + x^(gamma', n') - x^(gamma, n)
         (a shift fixed by the two points, so the map has unit Jacobian and
         reverses itself; in the coordinates (gamma, n, x - x^) the move is
         the ensemble's plain move of (gamma, n) given the rest). Without the
@@ -181,6 +185,11 @@ class _MaterialChain(_JointChain):
         state's :func:`~bayesgloss.illumination.unit_parts`."""
         rng, p, data = self.rng, self.data.priors, self.data
         move = self._moves[int(self._cdf.searchsorted(rng.random(), side="right"))]
+        # carried along the profile or not, at even odds fixed before the move
+        # (a mixture of two exact kernels): where the data are noise, the
+        # profile's least-squares fit is noise too and its shift threw the
+        # frames into their priors' tails (acceptance 0.03 at sigma 0.57)
+        carry = rng.random() < 0.5
         order = rng.permutation(self.w)
         halves = (order[: self.w // 2], order[self.w // 2 :])
         out = None
@@ -196,11 +205,12 @@ class _MaterialChain(_JointChain):
             new[..., 1] = np.clip(q[:, None, :, 1], *p.log_n)
             parts_old = il.unit_parts(old, data, self.tables)
             parts_new = il.unit_parts(new, data, self.tables)
-            s_old, f_old = self._profile(parts_old, lam)
-            s_new, f_new = self._profile(parts_new, lam)
-            new[..., 2] += s_new - s_old
             lam_new = lam.copy()
-            lam_new[..., 1 : 1 + f_new.shape[-1]] += f_new - f_old
+            if carry:
+                s_old, f_old = self._profile(parts_old, lam)
+                s_new, f_new = self._profile(parts_new, lam)
+                new[..., 2] += s_new - s_old
+                lam_new[..., 1 : 1 + f_new.shape[-1]] += f_new - f_old
             lp_new = np.where(inside, self._conditional(new, hyper, lam_new, parts_new), -np.inf)
             lp_old = self._conditional(old, hyper, lam, parts_old)
             with np.errstate(invalid="ignore"):
@@ -245,7 +255,7 @@ class _MaterialChain(_JointChain):
     def sweep(self) -> None:
         data = self.data
         parts = self._shared_step()
-        _, q = il.log_likelihood_sigma_marginal(self.th, self.lam, data, parts, with_q=True)
+        _, q = il.log_likelihood_shared_sigma(self.th, self.lam, data, parts, with_q=True)
         log_sigma = self._draw_log_sigma(q)
         self._scale_step(parts, log_sigma)
         self._hyper_draw()
@@ -256,6 +266,9 @@ class _MaterialChain(_JointChain):
         self._scale_ridge()
         self.collective_moves()
         self.sweeps += 1
+
+    def _draw_log_sigma(self, q):
+        return il.draw_shared_log_sigma(q, self.data, self.rng)
 
     def _frame_prior(self, lam, walkers=slice(None), hyper=None):
         hyper = self.hyper[:, walkers] if hyper is None else hyper
@@ -333,9 +346,9 @@ class _MaterialChain(_JointChain):
     def _full_density(self, th, hyper, lam) -> np.ndarray:
         """The joint log posterior (sigma integrated out) of every walker, (E, W)."""
         lp = il.log_prior_material(th, hyper, self.data)
-        ll = il.log_likelihood_sigma_marginal(
+        ll = il.log_likelihood_shared_sigma(
             np.where(np.isfinite(lp)[:, None, :, None], th, self.th), lam, self.data
-        ).sum(1)
+        )
         frames = self._frame_prior(lam, hyper=hyper).sum(-1)
         return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
 
@@ -375,6 +388,24 @@ def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
     return np.clip(np.where(bad, edge, log_tau), lo, hi)
 
 
+def _robust_scales(s, axis: int = 0, spread: float = 6.0) -> np.ndarray:
+    """Least-squares scales kept within e^+-``spread`` of their median along
+    ``axis`` (the facets): a facet whose noise swamps its curve can have a
+    scale <= 0 by least squares, which a floor at 1e-300 turned into log s =
+    -690, a start no walker left (found on a third of the one-material SBC's
+    prior draws, where sigma reaches 2)."""
+    ok = np.isfinite(s) & (s > 0)
+    log_s = np.log(np.where(ok, s, 1.0))
+    # the median of the positive scales (0 where none is): sorted with the
+    # others pushed to +inf, taken at the middle of each row's positive count
+    count = ok.sum(axis=axis, keepdims=True)
+    ordered = np.sort(np.where(ok, log_s, np.inf), axis=axis)
+    middle = np.take_along_axis(ordered, np.maximum(count - 1, 0) // 2, axis=axis)
+    mid = np.where(count > 0, middle, 0.0)
+    log_s = np.where(ok, np.clip(log_s, mid - spread, mid + spread), mid)
+    return np.exp(log_s)
+
+
 def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray]:
     """One material's best (gamma, log n) on a grid given the frames ``lam``
     (T, L), and each facet's log s at it, (F,): weighted least squares of
@@ -395,7 +426,7 @@ def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray
         mu = (1 - g) * mus[0] + g * mus[1]  # (F, N, T)
         num = np.sum(w[:, None] * data.y[:, None] * mu, -1)
         den = np.maximum(np.sum(w[:, None] * mu * mu, -1), 1e-300)
-        s = np.maximum(num / den, 1e-300)
+        s = _robust_scales(num / den)
         r = np.sum(w[:, None] * (data.y[:, None] - s[..., None] * mu) ** 2, -1).sum(0)  # (N,)
         j = int(np.argmin(r))
         if r[j] < best_r:
