@@ -97,7 +97,7 @@ def sbc_object(ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int 
         "converged": bool(res.converged),
         "rhat": float(res.rhat[0]),
         "rhat_walkers": rhat_walkers,
-        "sweeps": int(res.sweeps),
+        "sweeps": int(res.n_sweeps),
         "seconds": float(res.seconds),
     }
 
@@ -113,8 +113,11 @@ def main(argv=None) -> dict:
     t0 = time.time()
     ref = sbc_design(paper_three_skies())
     run = functools.partial(sbc_object, ref, args.seed, max_sweeps=args.max_sweeps)
+    rows = []
     with process_pool(args.jobs) as pool:
-        rows = list(pool.map(run, range(args.n)))
+        for row in pool.map(run, range(args.n)):
+            rows.append(row)
+            print(json.dumps(row), flush=True)  # each object as it ends
     ranks = np.array([r["ranks"] for r in rows])
     out = {"n": args.n, "seed": args.seed, "draws": 99, "minutes": (time.time() - t0) / 60}
     out["design"] = {"facets": ref.shape[0], "frames": ref.shape[1], "max_sweeps": args.max_sweeps}
