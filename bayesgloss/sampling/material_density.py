@@ -12,6 +12,11 @@ a sum over entries; its gradient in closed form from the bilinear model
 (:func:`log_density_and_gradient`); each frame's hidden-sun indicator drawn
 from its conditional (:func:`hidden_step`); dispersed starts
 (:func:`dispersed_starts`).
+
+Its noise is a sigma for each facet, the one-material model as it was in
+stop 24; the default sampler's model has had one sigma for all facets
+since (:func:`bayesgloss.illumination.log_likelihood_shared_sigma` says
+why), which this module does not follow yet.
 """
 
 from __future__ import annotations
