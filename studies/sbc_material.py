@@ -14,7 +14,8 @@ chain), which tells a sampler that has not mixed from a model that is
 wrong (stop 24: 1.7-6.4 with a sigma per facet; figures in
 studies/README.md). Too long for the test suite.
 
-    python studies/sbc_material.py [--n 100] [--seed 2027] [--jobs 2] [--out studies/results/sbc_material.json]
+    python studies/sbc_material.py [--n 100] [--seed 2027] [--jobs 2]
+        [--max-sweeps 4000] [--out studies/results/sbc_material.json]
 """
 
 from __future__ import annotations
@@ -29,10 +30,9 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from bayesgloss import diagnostics
+from bayesgloss import diagnostics, scene, sky
 from bayesgloss import illumination as il
 from bayesgloss import likelihood as lk
-from bayesgloss import scene, sky
 from bayesgloss.pool import process_pool
 from bayesgloss.sampling import sample_material
 
