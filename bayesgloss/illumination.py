@@ -351,11 +351,22 @@ class JointData:
     def sigma_constants(self):
         """k = T_f / 2, the constant of the sigma-marginal likelihood, and the
         tail cuts of :func:`bayesgloss.gamma_interval.log_gamma_interval`, (F,) each."""
-        la, lb = self.priors.log_sigma
-        k = 0.5 * self.valid.sum(axis=1).astype(float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
-        return k, const, tail_cuts(k)
+        return _sigma_constants(0.5 * self.valid.sum(axis=1).astype(float), self.priors)
+
+    @functools.cached_property
+    def shared_sigma_constants(self):
+        """:attr:`sigma_constants` for one sigma of all facets, (1,) each
+        (:func:`log_likelihood_shared_sigma`)."""
+        return _sigma_constants(np.array([0.5 * float(self.valid.sum())]), self.priors)
+
+
+def _sigma_constants(k, priors: lk.Priors):
+    """(k, the constant of the sigma-marginal likelihood, the tail cuts of
+    :func:`~bayesgloss.gamma_interval.log_gamma_interval`) for orders k."""
+    la, lb = priors.log_sigma
+    with np.errstate(divide="ignore", invalid="ignore"):
+        const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
+    return k, const, tail_cuts(k)
 
 
 def joint_data(
@@ -590,19 +601,11 @@ def log_likelihood_sigma_marginal(theta, lam, data: JointData, parts=None, with_
     The closed form of :func:`bayesgloss.likelihood.log_likelihood_sigma_marginal`
     with Q = sum_t z'_t^2 and the sd per unit sigma v_t = mu_ft + c_f.
     """
-    la, lb = data.priors.log_sigma
     z, log_v = _residuals(predict(theta, lam, data, parts), data)
     q = np.maximum(np.sum(z * z, axis=-1), 1e-300)
-    k, const, (lo_cut, hi_cut) = data.sigma_constants
-    shape = q.shape
-    k, lo_cut, hi_cut = (np.broadcast_to(x[None, :, None], shape) for x in (k, lo_cut, hi_cut))
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        log_int = log_gamma_interval(
-            k, q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), (lo_cut, hi_cut)
-        )
-        ll = const[None, :, None] - log_v.sum(-1) - k * np.log(q) + log_int
-    ll = np.where(k > 0, ll, 0.0)
-    ll = np.where(np.isnan(ll), -np.inf, ll)
+    k, const, cuts = data.sigma_constants
+    k, const, *cuts = (x[None, :, None] for x in (k, const, *cuts))  # over (E, F, W)
+    ll = _log_marginal_over_sigma(q, log_v.sum(-1), k, const, cuts, data.priors)
     return (ll, q) if with_q else ll
 
 
@@ -621,22 +624,28 @@ def log_likelihood_shared_sigma(theta, lam, data: JointData, parts=None, with_q=
     over walkers 2-10 on 24-facet, 12-frame prior draws; one sigma, no facet
     can be fitted alone). With ``with_q``, also each facet's Q (E, F, W).
     """
-    la, lb = data.priors.log_sigma
     z, log_v = _residuals(predict(theta, lam, data, parts), data)
     q_f = np.sum(z * z, axis=-1)
     q = np.maximum(q_f.sum(axis=1), 1e-300)
-    k = 0.5 * float(data.valid.sum())
-    if k == 0:  # no observation: the likelihood is flat
-        return (np.zeros(q.shape), q_f) if with_q else np.zeros(q.shape)
-    const = -k * np.log(np.pi) + special.gammaln(k) - np.log(2.0 * (lb - la))
-    cuts = tuple(np.full(q.shape, c) for c in tail_cuts(np.float64(k)))
+    k, const, cuts = data.shared_sigma_constants
+    ll = _log_marginal_over_sigma(q, log_v.sum(axis=(1, -1)), k, const, cuts, data.priors)
+    return (ll, q_f) if with_q else ll
+
+
+def _log_marginal_over_sigma(q, sum_log_v, k, const, cuts, priors: lk.Priors):
+    """The closed form of the sigma-marginal log likelihood, elementwise over
+    q's shape (the other arrays broadcast to it): const - sum log v - k log Q
+    + log of the incomplete gamma interval over the prior's sigma range; 0
+    where k = 0 (no observation), -inf where NaN."""
+    la, lb = priors.log_sigma
+    k, lo_cut, hi_cut = (np.broadcast_to(x, q.shape) for x in (k, *cuts))
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         log_int = log_gamma_interval(
-            np.full(q.shape, k), q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), cuts
+            k, q * (0.5 * np.exp(-2 * lb)), q * (0.5 * np.exp(-2 * la)), (lo_cut, hi_cut)
         )
-        ll = const - log_v.sum(axis=(1, -1)) - k * np.log(q) + log_int
-    ll = np.where(np.isnan(ll), -np.inf, ll)
-    return (ll, q_f) if with_q else ll
+        ll = const - sum_log_v - k * np.log(q) + log_int
+    ll = np.where(k > 0, ll, 0.0)
+    return np.where(np.isnan(ll), -np.inf, ll)
 
 
 def draw_shared_log_sigma(q, data: JointData, rng: np.random.Generator) -> np.ndarray:

@@ -228,14 +228,13 @@ def test_shared_sigma_marginal_is_the_integral_over_one_sigma(paper_split):
     ll = il.log_likelihood_shared_sigma(th, lam, data)[0, 0]
     la, lb = data.priors.log_sigma
     grid = np.linspace(la, lb, 200001)
-    point = th.repeat(1, axis=0)
     z, log_v = il._residuals(il.predict(th, lam, data), data)
     q, sum_log_v, n = np.sum(z * z), log_v.sum(), valid.sum()
     logl = -0.5 * q * np.exp(-2 * grid) - n * grid - sum_log_v - 0.5 * n * np.log(2 * np.pi)
     peak = logl.max()
     integral = peak + np.log(np.trapezoid(np.exp(logl - peak), grid) / (lb - la))
     assert abs(ll - integral) < 1e-6
-    per_facet = il.log_likelihood_sigma_marginal(point, lam, data)[0, :, 0].sum()
+    per_facet = il.log_likelihood_sigma_marginal(th, lam, data)[0, :, 0].sum()
     assert abs(per_facet - ll) > 1.0
     # and the draw of that sigma is its conditional: mean of sigma^-2 is 2k / Q
     _, q_f = il.log_likelihood_shared_sigma(th, lam, data, with_q=True)
