@@ -132,7 +132,7 @@ def main(argv=None) -> dict:
         # truth where 5 <= rank <= 94: 90 of the 100 ranks
         out[name]["covered_90"] = float(np.mean((ranks[:, k] >= 5) & (ranks[:, k] <= 94)))
     out["objects"] = rows
-    print(json.dumps({k: v for k, v in out.items() if k != "ranks"}, indent=1))
+    print(json.dumps({k: v for k, v in out.items() if k != "objects"}, indent=1))
     if args.out:
         Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
     return out
