@@ -85,7 +85,7 @@ def _demo(args: argparse.Namespace) -> int:
         cfg.material, cfg.specularity, cfg.colour, b.view_geometry().cos_view
     ).mean()
     print(
-        f"object gloss: posterior {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}], "
+        f"object gloss: posterior {g['median']:.3f} [90 %: {_interval(g)}], "
         f"baseline (peak frame) {base.object_gloss:.3f}; the material's true gamma "
         f"{b.truth['gloss']:.3f} at normal view, {fresnel:.3f} over the facets' view angles "
         "with Radiance's Fresnel raise"
@@ -256,6 +256,13 @@ def _estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _interval(q: dict) -> str:
+    """The reported 90 % interval of a summary entry: its highest-density
+    interval (quantiles in a summary written before it had one)."""
+    lo, hi = q.get("hdi90") or (q["q05"], q["q95"])
+    return f"{lo:.3f}, {hi:.3f}"
+
+
 def _print_estimate(name, summary) -> None:
     o = summary["object"]
     g = o["gamma"]
@@ -264,17 +271,17 @@ def _print_estimate(name, summary) -> None:
         f"{summary['camera']} camera)"
     )
     print(
-        f"object gamma {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}], "
+        f"object gamma {g['median']:.3f} [90 %: {_interval(g)}], "
         f"{o['facets_converged']}/{o['facets']} facets converged"
     )
-    print(f"{'facet':>6} {'gamma':>6} {'q05':>6} {'q95':>6}  flags")
+    print(f"{'facet':>6} {'gamma':>6} {'90 % interval':>13}  flags")
     for f in summary["facets"]:
         if f["gamma"] is None:
-            print(f"{f['id']:>6}      -      -      -  {', '.join(f['flags'])}")
+            print(f"{f['id']:>6}      - {'-':>13}  {', '.join(f['flags'])}")
             continue
         fg = f["gamma"]
         print(
-            f"{f['id']:>6} {fg['median']:6.3f} {fg['q05']:6.3f} {fg['q95']:6.3f}  "
+            f"{f['id']:>6} {fg['median']:6.3f} {_interval(fg):>13}  "
             f"{', '.join(f['flags'])}"
         )
 
@@ -336,7 +343,7 @@ def _estimate_many(args, progress) -> int:
         return 0
     for b, f in zip(args.bundle, folders, strict=True):
         g = summaries[b]["object"]["gamma"]
-        print(f"{b}: object gamma {g['median']:.3f} [90 %: {g['q05']:.3f}, {g['q95']:.3f}] -> {f}")
+        print(f"{b}: object gamma {g['median']:.3f} [90 %: {_interval(g)}] -> {f}")
     return 0
 
 

@@ -82,7 +82,7 @@ from .joint_estimate import (
     joint_fit,
     sky_model_summary,
 )
-from .joint_estimate import posterior_quantiles as _quantiles
+from .intervals import posterior_quantiles as _quantiles
 from .pool import process_pool
 from .pooling import population_gloss, shared_gloss
 from .results import (
@@ -407,6 +407,11 @@ def _facets_fit(
     return idata, samples
 
 
+def _width(q: dict) -> float:
+    """Width of the reported 90 % interval (highest density) of a summary."""
+    return q["hdi90"][1] - q["hdi90"][0]
+
+
 def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run):
     """The summary of an estimate and its result."""
     ids = curves.ids[keep]
@@ -422,7 +427,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
         gq = _quantiles(per_facet[k])
-        if gq["q95"] - gq["q05"] > NOT_IDENTIFIABLE_WIDTH:
+        if _width(gq) > NOT_IDENTIFIABLE_WIDTH:
             flags.append("gloss-not-identifiable")
         if mostly_saturated[k]:
             flags.append("mostly-saturated")
@@ -466,7 +471,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     obj_flags = [] if obj_converged else ["not-converged"]
     if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
         obj_flags.append("mostly-saturated")
-    if obj_q["q95"] - obj_q["q05"] > NOT_IDENTIFIABLE_WIDTH:
+    if _width(obj_q) > NOT_IDENTIFIABLE_WIDTH:
         obj_flags.append("gloss-not-identifiable")
     summary = {
         "object": {

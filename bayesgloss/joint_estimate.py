@@ -17,6 +17,7 @@ import numpy as np
 from . import illumination as il
 from . import sampling, sky
 from ._thirdparty import arviz
+from .intervals import posterior_quantiles
 from .irradiance import measured_sky
 
 __all__ = [
@@ -190,23 +191,4 @@ def sky_model_summary(idata) -> dict | None:
     return {
         "weights": {n: float(m) for n, m in zip(names, mean, strict=True)},
         "most_weight": names[int(np.argmax(mean))],
-    }
-
-
-def posterior_quantiles(x) -> dict:
-    """Median, 5 and 95 % quantiles, and the 90 % highest-density interval.
-
-    For a gamma at the edge of [0, 1] the equal-tailed interval cannot hold
-    the edge; the highest-density interval can.
-    """
-    az = arviz()
-
-    x = np.asarray(x, float).ravel()
-    q = np.quantile(x, [0.05, 0.5, 0.95])
-    hdi = az.hdi(x, hdi_prob=0.9)
-    return {
-        "median": float(q[1]),
-        "q05": float(q[0]),
-        "q95": float(q[2]),
-        "hdi90": [float(hdi[0]), float(hdi[1])],
     }

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .intervals import highest_density_interval
+
 __all__ = ["posterior_report", "save_png", "format_comparison"]
 
 
@@ -150,7 +152,7 @@ def posterior_report(
     gamma = idata.posterior["gamma"].values  # (E, S, F)
     flat = gamma.reshape(-1, gamma.shape[-1])
     med = np.median(flat, axis=0)
-    q05, q95 = np.quantile(flat, [0.05, 0.95], axis=0)
+    lo90, hi90 = highest_density_interval(flat)  # the reported 90 % interval
 
     fig = plt.figure(figsize=(15, 14.5), constrained_layout=True)
     grid = fig.add_gridspec(3, 4, height_ratios=[1, 1, 1.15])
@@ -172,24 +174,25 @@ def posterior_report(
 
     ax = fig.add_subplot(grid[0, 2])
     im = ax.imshow(
-        _paint(bundle.labels, ids, q95 - q05),
+        _paint(bundle.labels, ids, hi90 - lo90),
         cmap="magma_r",
         vmin=0,
-        vmax=max(0.05, float(np.max(q95 - q05))),
+        vmax=max(0.05, float(np.max(hi90 - lo90))),
     )
     ax.set_title("(c) 90 % interval width")
     ax.axis("off")
-    fig.colorbar(im, ax=ax, shrink=0.8, label="q95 - q05 [-]")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="highest-density interval width [-]")
 
     ax = fig.add_subplot(grid[0, 3])
     obj = summary["object"]["gamma"]
+    obj_lo, obj_hi = obj.get("hdi90") or (obj["q05"], obj["q95"])
     ax.hist(med, bins=np.linspace(0, 1, 41), color="0.75", label="facet medians")
     ax.axvspan(
-        obj["q05"],
-        obj["q95"],
+        obj_lo,
+        obj_hi,
         color="tab:blue",
         alpha=0.3,
-        label=f"object (population) 90 %: {obj['q05']:.3f}-{obj['q95']:.3f}",
+        label=f"object 90 %: {obj_lo:.3f}-{obj_hi:.3f}",
     )
     ax.axvline(obj["median"], color="tab:blue", lw=2, label=f"object median {obj['median']:.3f}")
     if baseline is not None and np.isfinite(baseline.object_gloss):
@@ -216,7 +219,7 @@ def posterior_report(
         ax.plot(frames, mid, color="tab:blue", lw=1.5, label="predictive median")
         ax.plot(frames, y[k], "ko", ms=4, label="observed")
         ax.set_title(
-            f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{q05[k]:.2f}, {q95[k]:.2f}]", fontsize=9
+            f"(e) facet {ids[k]}: gamma {med[k]:.2f} [{lo90[k]:.2f}, {hi90[k]:.2f}]", fontsize=9
         )
         ax.set(xlabel="frame", ylabel=f"luminance [{summary.get('unit', 'relative')}]")
         if j == 0:

@@ -87,6 +87,7 @@ __all__ = [
     "camera_response",
     "auto_exposure",
     "DEFAULT_AMBIENT",
+    "AMBIENT_BEFORE_ST",
 ]
 
 #: A sequence's name: it names the bundle's folder under ``--out``.
@@ -94,12 +95,23 @@ NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,127}"
 #: rtrace's ambient and sampling options a config may set (each with a
 #: number), and its switches; nothing else reaches rtrace's command line
 #: (``-e FILE`` once made rtrace write a file anywhere).
-AMBIENT_OPTIONS = ("-ab", "-aa", "-ar", "-ad", "-as", "-lr", "-lw", "-dj", "-ds", "-dt", "-dc")
+AMBIENT_OPTIONS = (
+    "-ab", "-aa", "-ar", "-ad", "-as", "-lr", "-lw", "-dj", "-ds", "-dt", "-dc", "-st", "-ss"
+)  # fmt: skip
 AMBIENT_SWITCHES = ("-u-", "-u+", "-u")
 
 #: rtrace settings for the test sequences: two bounces (facet -> ground ->
 #: sky), irradiance cache at 10 % accuracy with a resolution fine for the
-#: 40 m scene (-ar 512: 8 cm), 512 stratified samples, repeatable sampling.
+#: 40 m scene (-ar 512: 8 cm), 512 stratified samples, repeatable sampling,
+#: and ``-st 0``: every rough specular reflection is traced. With rtrace's
+#: default ``-st 0.15``, ``normal.c`` sets SP_RBLT on a rough (roughness >
+#: 0) material of specularity <= 0.15, skips its specular sampling
+#: (``gaussamp``) and reflects all indirect light (sky, ground) through the
+#: diffuse ambient with the full material colour: the sky's glossy reflection
+#: becomes a Lambertian one, and only the sun keeps its lobe. Real surfaces
+#: do not do that. The validation sets rendered before this (stop 26) used
+#: the settings without it (:data:`AMBIENT_BEFORE_ST`), which their configs
+#: name.
 DEFAULT_AMBIENT = (
     "-ab",
     "2",
@@ -116,7 +128,13 @@ DEFAULT_AMBIENT = (
     "-lw",
     "1e-4",
     "-u-",
+    "-st",
+    "0",
 )
+
+#: :data:`DEFAULT_AMBIENT` as it was to stop 25, with rtrace's default
+#: specular threshold (``-st 0.15``).
+AMBIENT_BEFORE_ST = DEFAULT_AMBIENT[:-2]
 
 #: Sky names of :class:`SequenceConfig` (``cie-N``: the CIE standard general skies).
 SKIES = (

@@ -276,7 +276,9 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     grey = _flags(rng, m["grey"], n)
     groups = [list(rng.permutation(g)) for g in cfg["sky"]["cie_type_groups"]]
     n_cie = 0
-    ambient = sequences.DEFAULT_AMBIENT if cfg["ambient"] == "DEFAULT_AMBIENT" else cfg["ambient"]
+    ambient = cfg["ambient"]
+    if isinstance(ambient, str):  # a name of bayesgloss.sequences' settings
+        ambient = getattr(sequences, ambient)
 
     out = []
     for i in range(n):

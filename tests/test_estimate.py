@@ -127,7 +127,7 @@ def test_estimate_cli_json_on_a_rendered_bundle(tmp_path):
         code = cli.main(["estimate", str(path), "--json", "--quiet", "--out", str(out)])
     assert code == 0
     res = json.loads(buf.getvalue())
-    assert set(res["object"]["gamma"]) >= {"median", "q05", "q95"}
+    assert set(res["object"]["gamma"]) >= {"median", "q05", "q95", "hdi90"}
     assert "converged" in res["object"] and "n" in res["object"]
     facet = res["facets"][0]
     assert {"id", "gamma", "converged", "flags"} <= set(facet)
