@@ -782,7 +782,7 @@ def test_fresnel_gloss_of_radiance_material():
 
 
 @pytest.mark.radiance
-def test_default_ambient_traces_the_rough_lobe_of_low_specularity(radiance_bin, tmp_path):
+def test_traced_ambient_keeps_the_rough_lobe_of_low_specularity(radiance_bin, tmp_path):
     # Rough plastic (grey 0.5, specularity 0.1, roughness 0.1) seen at cos 0.7
     # with a glow patch of radiance 1 and radius 10 deg on the view's mirror
     # direction, nothing else. Expected: 0.5 (1 - 0.1) E / pi + 0.1 G, E the
@@ -790,8 +790,8 @@ def test_default_ambient_traces_the_rough_lobe_of_low_specularity(radiance_bin, 
     # quadrature: 0.0745. With rtrace's default -st 0.15, normal.c sets SP_RBLT
     # (specularity <= threshold) and reflects the patch through the diffuse
     # ambient with the full colour: 0.5 E / pi = 0.0106 (measured 0.0116; the
-    # irradiance cache at -aa 0.1 errs by some %). DEFAULT_AMBIENT has -st 0;
-    # the settings before it must show the Lambertian value. 2000 rays at
+    # irradiance cache at -aa 0.1 errs by some %): DEFAULT_AMBIENT must show
+    # that Lambertian value, TRACED_SPECULAR_AMBIENT (-st 0) the lobe. 2000 rays at
     # random points: the sampled lobe's standard error is 1.4 % (measured).
     from bayesgloss import sequences
 
@@ -823,8 +823,9 @@ def test_default_ambient_traces_the_rough_lobe_of_low_specularity(radiance_bin, 
     glossy = np.sum(lobe * cos_i * d_omega)
     expected = 0.5 * 0.9 * irradiance / np.pi + 0.1 * glossy
     lambertian = 0.5 * irradiance / np.pi
-    now = rtrace(radiance_bin, tmp_path, scene, rays, list(sequences.DEFAULT_AMBIENT))[:, 0]
-    before = rtrace(radiance_bin, tmp_path, scene, rays, list(sequences.AMBIENT_BEFORE_ST))
+    now = rtrace(radiance_bin, tmp_path, scene, rays, list(sequences.TRACED_SPECULAR_AMBIENT))
+    now = now[:, 0]
+    before = rtrace(radiance_bin, tmp_path, scene, rays, list(sequences.DEFAULT_AMBIENT))
     assert abs(now.mean() / expected - 1) < 0.05, (now.mean(), expected)
     assert abs(before[:, 0].mean() / lambertian - 1) < 0.15, (before[:, 0].mean(), lambertian)
     assert expected > 5 * lambertian
