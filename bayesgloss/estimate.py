@@ -82,6 +82,7 @@ from .joint_estimate import (
     joint_fit,
     sky_model_summary,
 )
+from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .pool import process_pool
 from .pooling import population_gloss, shared_gloss
@@ -426,7 +427,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     facets = []
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
-        gq = _quantiles(per_facet[k])
+        gq = _quantiles(per_facet[k], GAMMA_BOUNDS)
         if _width(gq) > NOT_IDENTIFIABLE_WIDTH:
             flags.append("gloss-not-identifiable")
         if mostly_saturated[k]:
@@ -461,11 +462,11 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data_priors
     )
     if "gamma_object" in idata.posterior:  # the one-material model's own answer
-        obj_q = _quantiles(idata.posterior["gamma_object"].values)
+        obj_q = _quantiles(idata.posterior["gamma_object"].values, GAMMA_BOUNDS)
         obj_converged = bool(samples.converged) and len(ids) > 0
         model = "one material (shared gamma and n, hierarchical albedo, per-frame light)"
     else:
-        obj_q = _quantiles(pop["mu"])
+        obj_q = _quantiles(pop["mu"], GAMMA_BOUNDS)
         obj_converged = bool(np.all(conv)) and len(ids) > 0
         model = "population (hierarchical Beta)"
     obj_flags = [] if obj_converged else ["not-converged"]
@@ -480,7 +481,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
             "n": {"median": shared["n_median"]},
             "converged": obj_converged,
             "model": model,
-            "facet_population_gamma": _quantiles(pop["mu"]),
+            "facet_population_gamma": _quantiles(pop["mu"], GAMMA_BOUNDS),
             "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
             "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
             "facets_converged": int(conv.sum()),

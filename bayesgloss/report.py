@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .intervals import highest_density_interval
+from .intervals import GAMMA_BOUNDS, highest_density_interval
 
 __all__ = ["posterior_report", "save_png", "format_comparison"]
 
@@ -152,7 +152,7 @@ def posterior_report(
     gamma = idata.posterior["gamma"].values  # (E, S, F)
     flat = gamma.reshape(-1, gamma.shape[-1])
     med = np.median(flat, axis=0)
-    lo90, hi90 = highest_density_interval(flat)  # the reported 90 % interval
+    lo90, hi90 = highest_density_interval(flat, bounds=GAMMA_BOUNDS)  # as reported
 
     fig = plt.figure(figsize=(15, 14.5), constrained_layout=True)
     grid = fig.add_gridspec(3, 4, height_ratios=[1, 1, 1.15])

@@ -153,14 +153,14 @@ def table(scores: list[dict]) -> dict:
                 tails = [s[m]["q05"] <= s["truth"] <= s[m]["q95"] for s in sun if m in s]
                 e["coverage90_equal_tailed_direct_sun"] = float(np.mean(tails)) if tails else None
                 over = [s for s in rows if not s["direct_sun"] and m in s]
-                e["overcast_ok"] = sum(
+                e["overcast_ok"] = int(sum(
                     abs(s[m]["median"] - s["truth"]) <= 0.05
                     or (
                         "gloss-not-identifiable" in s[m]["flags"]
                         and np.ptp(interval(s[m])) > 0.5
                     )
                     for s in over
-                )
+                ))
                 e["overcast"] = len(over)
                 e["not_converged"] = sum("not-converged" in s[m]["flags"] for s in rows if m in s)
             out.setdefault(cat, {})[m] = e

@@ -55,3 +55,21 @@ def test_hdi_of_a_symmetric_posterior_is_the_equal_tailed_interval():
 def test_hdi_rejects_a_mass_outside_zero_one():
     with pytest.raises(ValueError, match="prob"):
         intervals.highest_density_interval([0.1, 0.2], prob=1.0)
+
+
+def test_hdi_of_a_matt_posterior_reaches_zero_with_bounds():
+    # draws never sit exactly on gamma = 0; given the support, a window that
+    # starts at the smallest draw reaches the edge. A posterior with its mode
+    # inside (Beta(8, 8)) keeps the window of its draws: the rule must not
+    # widen it.
+    rng = np.random.default_rng(9)
+    x = rng.beta(1.0, 30.0, 4000)
+    lo, hi = intervals.highest_density_interval(x, bounds=(0.0, 1.0))
+    assert lo == 0.0 and hi == intervals.highest_density_interval(x)[1]
+    y = rng.beta(8.0, 8.0, 4000)
+    np.testing.assert_array_equal(
+        intervals.highest_density_interval(y, bounds=(0.0, 1.0)),
+        intervals.highest_density_interval(y),
+    )
+    top = intervals.posterior_quantiles(1.0 - x, bounds=(0.0, 1.0))
+    assert top["hdi90"][1] == 1.0 and top["q95"] < 1.0
