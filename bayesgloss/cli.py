@@ -257,9 +257,10 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _interval(q: dict) -> str:
-    """The reported 90 % interval of a summary entry: its highest-density
-    interval (quantiles in a summary written before it had one)."""
-    lo, hi = q.get("hdi90") or (q["q05"], q["q95"])
+    """The reported 90 % interval of a summary entry, as printed."""
+    from .intervals import reported_interval
+
+    lo, hi = reported_interval(q)
     return f"{lo:.3f}, {hi:.3f}"
 
 
@@ -280,10 +281,7 @@ def _print_estimate(name, summary) -> None:
             print(f"{f['id']:>6}      - {'-':>13}  {', '.join(f['flags'])}")
             continue
         fg = f["gamma"]
-        print(
-            f"{f['id']:>6} {fg['median']:6.3f} {_interval(fg):>13}  "
-            f"{', '.join(f['flags'])}"
-        )
+        print(f"{f['id']:>6} {fg['median']:6.3f} {_interval(fg):>13}  {', '.join(f['flags'])}")
 
 
 def _estimate_many(args, progress) -> int:

@@ -75,6 +75,8 @@ from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky
 from . import likelihood as lk
 from ._thirdparty import arviz
+from .intervals import GAMMA_BOUNDS, reported_interval
+from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
     bundle_sky,
@@ -82,8 +84,6 @@ from .joint_estimate import (
     joint_fit,
     sky_model_summary,
 )
-from .intervals import GAMMA_BOUNDS
-from .intervals import posterior_quantiles as _quantiles
 from .pool import process_pool
 from .pooling import population_gloss, shared_gloss
 from .results import (
@@ -409,8 +409,9 @@ def _facets_fit(
 
 
 def _width(q: dict) -> float:
-    """Width of the reported 90 % interval (highest density) of a summary."""
-    return q["hdi90"][1] - q["hdi90"][0]
+    """Width of the reported 90 % interval of a summary entry."""
+    lo, hi = reported_interval(q)
+    return hi - lo
 
 
 def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run):

@@ -21,7 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GAMMA_BOUNDS", "INTERVAL_PROB", "highest_density_interval", "posterior_quantiles"]
+__all__ = [
+    "GAMMA_BOUNDS",
+    "INTERVAL_PROB",
+    "highest_density_interval",
+    "posterior_quantiles",
+    "reported_interval",
+]
 
 #: The support of the gloss factor gamma.
 GAMMA_BOUNDS = (0.0, 1.0)
@@ -95,3 +101,11 @@ def posterior_quantiles(x, bounds=None) -> dict:
         "q95": float(q[2]),
         "hdi90": [float(lo), float(hi)],
     }
+
+
+def reported_interval(q: dict) -> tuple[float, float]:
+    """(lower, upper) of the 90 % interval a summary entry of
+    :func:`posterior_quantiles` reports: its ``hdi90``, or the quantiles
+    ``q05``, ``q95`` in a summary written before it had one."""
+    lo, hi = q.get("hdi90") or (q["q05"], q["q95"])
+    return float(lo), float(hi)

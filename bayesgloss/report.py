@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .intervals import GAMMA_BOUNDS, highest_density_interval
+from .intervals import GAMMA_BOUNDS, highest_density_interval, reported_interval
 
 __all__ = ["posterior_report", "save_png", "format_comparison"]
 
@@ -185,7 +185,7 @@ def posterior_report(
 
     ax = fig.add_subplot(grid[0, 3])
     obj = summary["object"]["gamma"]
-    obj_lo, obj_hi = obj.get("hdi90") or (obj["q05"], obj["q95"])
+    obj_lo, obj_hi = reported_interval(obj)
     ax.hist(med, bins=np.linspace(0, 1, 41), color="0.75", label="facet medians")
     ax.axvspan(
         obj_lo,

@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bayesgloss.intervals import reported_interval
+
 HERE = Path(__file__).parent
 #: The sets: the 48-sequence validation set, and the 24-sequence holdout drawn
 #: after its first run (``configs/validation_holdout.json``).
@@ -123,15 +125,10 @@ def _cached(path: Path, max_sweeps: int, redo=(), scores: Path | None = None) ->
     return out
 
 
-def interval(entry: dict) -> tuple[float, float]:
-    """The 90 % interval bayesgloss reports (highest density,
-    :mod:`bayesgloss.intervals`); quantiles in scores cached before it had one."""
-    lo, hi = entry.get("hdi90") or (entry["q05"], entry["q95"])
-    return lo, hi
-
-
 def _holds(entry: dict, truth: float) -> bool:
-    lo, hi = interval(entry)
+    """Whether the interval bayesgloss reports (:mod:`bayesgloss.intervals`;
+    quantiles in scores cached before it had one) holds the truth."""
+    lo, hi = reported_interval(entry)
     return lo <= truth <= hi
 
 
@@ -153,14 +150,16 @@ def table(scores: list[dict]) -> dict:
                 tails = [s[m]["q05"] <= s["truth"] <= s[m]["q95"] for s in sun if m in s]
                 e["coverage90_equal_tailed_direct_sun"] = float(np.mean(tails)) if tails else None
                 over = [s for s in rows if not s["direct_sun"] and m in s]
-                e["overcast_ok"] = int(sum(
-                    abs(s[m]["median"] - s["truth"]) <= 0.05
-                    or (
-                        "gloss-not-identifiable" in s[m]["flags"]
-                        and np.ptp(interval(s[m])) > 0.5
+                e["overcast_ok"] = int(
+                    sum(
+                        abs(s[m]["median"] - s["truth"]) <= 0.05
+                        or (
+                            "gloss-not-identifiable" in s[m]["flags"]
+                            and np.ptp(reported_interval(s[m])) > 0.5
+                        )
+                        for s in over
                     )
-                    for s in over
-                ))
+                )
                 e["overcast"] = len(over)
                 e["not_converged"] = sum("not-converged" in s[m]["flags"] for s in rows if m in s)
             out.setdefault(cat, {})[m] = e
@@ -184,10 +183,11 @@ def figure(scores: list[dict], path: Path) -> None:
             y = s[m]["median"]
             marker = "o" if s["direct_sun"] else "x"
             if m != "baseline":
+                lo, hi = reported_interval(s[m])
                 ax.errorbar(
                     s["truth"],
                     y,
-                    yerr=[[y - interval(s[m])[0]], [interval(s[m])[1] - y]],
+                    yerr=[[y - lo], [hi - y]],
                     color=colours[s["category"]],
                     marker=marker,
                     ms=4,

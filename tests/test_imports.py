@@ -107,7 +107,8 @@ def test_leaf_modules_import_nothing_of_bayesgloss():
     # the process pool, the diagnostics and the quiet third-party imports are
     # used across the inference layer and must not pull it back in
     graph = import_graph()
-    for leaf in ("pool", "diagnostics", "_thirdparty", "gamma_interval", "intervals", "sampling.moves"):
+    leaves = ("pool", "diagnostics", "_thirdparty", "gamma_interval", "intervals", "sampling.moves")
+    for leaf in leaves:
         assert graph[f"bayesgloss.{leaf}"] == set(), (leaf, graph[f"bayesgloss.{leaf}"])
 
 
