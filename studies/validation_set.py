@@ -278,6 +278,12 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     n_cie = 0
     ambient = cfg["ambient"]
     if isinstance(ambient, str):  # a name of bayesgloss.sequences' settings
+        if not ambient.endswith("_AMBIENT") or not hasattr(sequences, ambient):
+            names = [n for n in sequences.__all__ if n.endswith("_AMBIENT")]
+            raise SystemExit(
+                f"validation config: field 'ambient': {ambient!r} is not one of "
+                f"{', '.join(names)} nor a list of rtrace options"
+            )
         ambient = getattr(sequences, ambient)
 
     out = []
