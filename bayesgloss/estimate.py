@@ -72,7 +72,7 @@ from pathlib import Path
 import numpy as np
 
 from . import bundle as bundle_io
-from . import diagnostics, render, sampling, sky
+from . import diagnostics, render, sampling, sky, sky_families
 from . import likelihood as lk
 from ._thirdparty import arviz
 from .intervals import GAMMA_BOUNDS, reported_interval
@@ -290,7 +290,10 @@ def estimate_bundle(
         The sky's shape: one of :data:`ILLUMINATION_MODELS`; ``"measured"``,
         the Perez sky of the bundle's ``frames[].irradiance``; or ``"auto"``
         (with ``per_frame`` only: each frame's sky a mixture of
-        :data:`AUTO_SKIES`, its weights inferred). Default: ``"measured"``
+        :data:`AUTO_SKIES`, its weights inferred); or ``"families"`` (with
+        ``per_frame`` only: one fit per day-level family of
+        :data:`bayesgloss.sky_families.FAMILIES`, stacked by PSIS-LOO,
+        :mod:`bayesgloss.sky_families`). Default: ``"measured"``
         where the bundle measures every frame with the sun up, else
         ``"auto"`` with ``per_frame`` and ``"gensky-clear"`` without.
     per_frame : bool
@@ -333,11 +336,26 @@ def estimate_bundle(
     joint = _joint_possible(per_frame, noise, camera)
     if illumination is None:
         illumination = default_illumination(b, per_frame=per_frame, noise=noise, camera=camera)
-    if illumination == "auto" and not joint:
+    if illumination in ("auto", "families") and not joint:
         raise ValueError(
-            "illumination 'auto' (a per-frame mixture of sky shapes) needs per-frame "
+            f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    if illumination == "families":
+        idata, samples, used, families = sky_families.fit_families(
+            b, curves, y, usable, censored, keep, seed, sampler_options, progress
+        )
+        run = {
+            "seconds": families.pop("seconds"),
+            "sweeps": samples.n_sweeps,
+            "facet_seconds": samples.facets.seconds,
+            "model": "joint, one fit per sky family, stacked",
+        }
+        out = _summarise(
+            b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run
+        )
+        out.summary["sky_families"] = families
+        return out
     if joint:
         idata, samples, used = joint_fit(
             b, curves, y, usable, censored, keep, illumination, seed, sampler_options, progress

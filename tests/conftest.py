@@ -85,6 +85,7 @@ def make_synthetic_bundle(
     response_gamma=2.2,
     bits=16,
     exposure=None,
+    sky_model="gensky-clear",
 ):
     """A small sequence bundle made by the forward model, no Radiance needed.
 
@@ -108,10 +109,15 @@ def make_synthetic_bundle(
     exposure : float, optional
         Radiance that maps to the top code [W sr^-1 m^-2]; default 1.25 x the
         brightest noisy facet radiance (nothing clips).
+    sky_model : str
+        The day's sky (:func:`bayesgloss.sky.daylight` name), gensky's clear
+        sky by default.
     """
     from bayesgloss import bundle, geometry, render, scene
 
-    seq = scene.paper_sequence(view=view, n_rings=n_rings, n_segments=n_segments)
+    seq = scene.paper_sequence(
+        view=view, sky_model=sky_model, n_rings=n_rings, n_segments=n_segments
+    )
     facing = np.flatnonzero(seq.geometry.cos_view > 0.2)
     facets = seq.facets.subset(facing)
     geom = render.view_geometry(facets, seq.camera_position, occluder=seq.facets)
