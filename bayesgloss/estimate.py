@@ -341,6 +341,7 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    families = None
     if illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
             b, curves, y, usable, censored, keep, seed, sampler_options, progress
@@ -351,12 +352,7 @@ def estimate_bundle(
             "facet_seconds": samples.facets.seconds,
             "model": "joint, one fit per sky family, stacked",
         }
-        out = _summarise(
-            b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run
-        )
-        out.summary["sky_families"] = families
-        return out
-    if joint:
+    elif joint:
         idata, samples, used = joint_fit(
             b, curves, y, usable, censored, keep, illumination, seed, sampler_options, progress
         )
@@ -390,7 +386,10 @@ def estimate_bundle(
             if not per_frame
             else "facets (per-frame illumination needs relative noise and a known pixel response)",
         }
-    return _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
+    out = _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
+    if families is not None:
+        out.summary["sky_families"] = families
+    return out
 
 
 def _facets_fit(

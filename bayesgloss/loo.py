@@ -1,8 +1,9 @@
 """Predictive model comparison by PSIS-LOO.
 
 :func:`loo_compare` compares fitted models (:class:`bayesgloss.compare.ModelFit`)
-through :func:`arviz.compare`: leave-one-frame-out per facet, and
-leave-one-facet-out for the object model, with the Pareto k of every term
+through :func:`arviz.compare` (:func:`loo_table`, which takes any pointwise
+log likelihoods): leave-one-frame-out per facet, and leave-one-facet-out
+for the object model, with the Pareto k of every term
 reported and k > 0.7 flagged, never dropped (Vehtari, Gelman & Gabry 2017;
 Vehtari et al. 2024). :func:`select_parsimonious` picks the simplest model
 within one standard error of the best.
@@ -17,7 +18,7 @@ import numpy as np
 
 from ._thirdparty import arviz
 
-__all__ = ["PARETO_K_MAX", "loo_compare", "select_parsimonious"]
+__all__ = ["PARETO_K_MAX", "loo_compare", "loo_table", "select_parsimonious"]
 
 log = logging.getLogger(__name__)
 
@@ -55,21 +56,39 @@ def loo_compare(fits: dict, *, problem: int | None = None) -> dict:
         ``name -> ndarray`` of every term's k; ``flagged``: models with any
         k > 0.7. High k is reported, never dropped.
     """
-    az = arviz()
-
-    idatas, ks = {}, {}
+    terms = {}
     for name, fit in fits.items():
         ll = fit.log_lik
         valid = fit.valid
         if problem is not None:
-            terms = ll[problem][..., valid[problem]]
+            terms[name] = ll[problem][..., valid[problem]]
         elif fit.model.level == "object":
             if fit.model.n_problems > 1:
                 raise ValueError("several objects: compare one at a time (problem=...)")
-            terms = ll[0]
+            terms[name] = ll[0]
         else:
-            terms = np.moveaxis(ll, 0, 2)[..., valid]  # (E, S, valid (facet, frame))
-        idatas[name] = _idata(terms)
+            terms[name] = np.moveaxis(ll, 0, 2)[..., valid]  # (E, S, valid (facet, frame))
+    return loo_table(terms)
+
+
+def loo_table(terms: dict) -> dict:
+    """PSIS-LOO comparison of models from their pointwise log likelihoods
+    (:func:`arviz.compare`, stacking weights of Yao et al. 2018).
+
+    Parameters
+    ----------
+    terms : dict
+        ``name -> ndarray (E, S, N)``: each model's log likelihood of the
+        same N terms at its E x S draws.
+
+    Returns
+    -------
+    dict
+        As :func:`loo_compare`.
+    """
+    az = arviz()
+    idatas = {name: _idata(ll) for name, ll in terms.items()}
+    ks = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         table = az.compare(idatas, ic="loo", method="stacking")

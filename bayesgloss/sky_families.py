@@ -8,8 +8,7 @@ object's gloss is the mixture of the fits' posteriors with the stacking
 weights of their leave-one-out predictive densities (Yao, Vehtari, Simpson
 & Gelman 2018, "Using stacking to average Bayesian predictive
 distributions", Bayesian Analysis 13, 917; PSIS-LOO of Vehtari, Gelman &
-Gabry 2017 over the facet-frame entries, :func:`arviz.loo`;
-:func:`stacking_weights`).
+Gabry 2017 over the facet-frame entries, :func:`bayesgloss.loo.loo_table`).
 
 Why not the per-frame mixture of shapes (``--sky auto``)? On the
 validation set (stop 27, seen sequences) the mixture read gamma 1.00
@@ -40,17 +39,14 @@ mixture carries both.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from scipy import optimize, special
 
-from ._thirdparty import arviz
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import AUTO_SKIES, joint_fit
+from .loo import loo_table
 
-__all__ = ["FAMILIES", "loo_stacking_weights", "stacking_weights", "mixture_draws", "fit_families"]
+__all__ = ["FAMILIES", "loo_stacking_weights", "mixture_draws", "fit_families"]
 
 #: The day-level sky families ``--sky families`` fits: gensky's clear,
 #: intermediate and overcast skies (the shapes of ``--sky auto``'s mixture).
@@ -65,7 +61,8 @@ def _pointwise(idata) -> np.ndarray:
 
 
 def loo_stacking_weights(idatas: dict) -> dict:
-    """Stacking weights and PSIS-LOO of fits of the same data.
+    """Stacking weights and PSIS-LOO of fits of the same data
+    (:func:`bayesgloss.loo.loo_table`).
 
     Parameters
     ----------
@@ -77,55 +74,12 @@ def loo_stacking_weights(idatas: dict) -> dict:
     -------
     dict of str to dict
         Per fit: ``weight`` (stacking), ``elpd_loo``, its ``se``, ``p_loo``
-        and ``high_k`` (entries with Pareto k above 0.7).
+        and ``high_k`` (entries with Pareto k above
+        :data:`~bayesgloss.loo.PARETO_K_MAX`).
     """
-    az = arviz()
-    loo = {}
-    reduced = {}
-    for name, idata in idatas.items():
-        ll = _pointwise(idata)
-        reduced[name] = az.from_dict(
-            posterior={"x": np.zeros(ll.shape[:2])}, log_likelihood={"y": ll}
-        )
-        with warnings.catch_warnings():  # high Pareto k is counted in the result
-            warnings.simplefilter("ignore", UserWarning)
-            loo[name] = az.loo(reduced[name], pointwise=True)
-    names = list(loo)
-    pointwise = np.stack([loo[n].loo_i.values for n in names], axis=-1)  # (N, K)
-    weights = dict(zip(names, stacking_weights(pointwise), strict=True))
-    return {
-        name: {
-            "weight": weights[name],
-            "elpd_loo": float(x.elpd_loo),
-            "se": float(x.se),
-            "p_loo": float(x.p_loo),
-            "high_k": int(np.sum(x.pareto_k.values > 0.7)),
-        }
-        for name, x in loo.items()
-    }
-
-
-def stacking_weights(elpd_pointwise) -> np.ndarray:
-    """Stacking weights of K models from their pointwise LOO log predictive
-    densities (N, K): the w on the simplex maximising
-    sum_i log sum_k w_k exp(elpd_ik) (Yao et al. 2018, eq. 4), found over
-    softmax coordinates (BFGS)."""
-    lp = np.asarray(elpd_pointwise, float)
-    k = lp.shape[1]
-    if k == 1:
-        return np.ones(1)
-    lp = lp - lp.max(axis=1, keepdims=True)  # per entry: the weights do not change
-
-    def weights(z):
-        v = np.concatenate([[0.0], z])
-        return special.softmax(v)
-
-    def loss(z):
-        return -np.sum(special.logsumexp(lp + np.log(weights(z) + 1e-300), axis=1))
-
-    best = optimize.minimize(loss, np.zeros(k - 1), method="BFGS")
-    w = weights(best.x)
-    return w / w.sum()
+    rows = loo_table({name: _pointwise(idata) for name, idata in idatas.items()})["table"]
+    kept = ("weight", "elpd_loo", "se", "p_loo")
+    return {r["model"]: {**{k: r[k] for k in kept}, "high_k": r["pareto_k_high"]} for r in rows}
 
 
 def mixture_draws(draws: list, weights, rng: np.random.Generator) -> np.ndarray:

@@ -65,9 +65,17 @@ def test_stacking_weights_of_two_complementary_models():
     # -5), model B the second: the stacking optimum is 1/2 each, which neither
     # picking the best nor LOO weights by total elpd (A and B tie) would show
     # as a mixture; a third model worse everywhere gets nothing
+    import arviz as az
+
     lp = np.full((40, 3), -5.0)
     lp[:20, 0] = 0.0
     lp[20:, 1] = 0.0
     lp[:, 2] = -8.0
-    w = sky_families.stacking_weights(lp)
+    draws = np.broadcast_to(lp.T.reshape(3, 1, 1, 4, 10), (3, 2, 100, 4, 10))
+    idatas = {
+        name: az.from_dict(posterior={"x": np.zeros((2, 100))}, log_likelihood={"y": ll})
+        for name, ll in zip("ABC", draws, strict=True)
+    }
+    scores = sky_families.loo_stacking_weights(idatas)
+    w = [scores[name]["weight"] for name in "ABC"]
     np.testing.assert_allclose(w, [0.5, 0.5, 0.0], atol=1e-3)
