@@ -344,7 +344,7 @@ def estimate_bundle(
     families = None
     if illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
-            b, curves, y, usable, censored, keep, seed, sampler_options, progress
+            b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs
         )
         run = {
             "seconds": families.pop("seconds"),

@@ -39,18 +39,22 @@ mixture carries both.
 
 from __future__ import annotations
 
+from concurrent.futures import as_completed
+
 import numpy as np
 
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import AUTO_SKIES, joint_fit
 from .loo import loo_table
+from .pool import process_pool
 
 __all__ = ["FAMILIES", "loo_stacking_weights", "mixture_draws", "fit_families"]
 
-#: The day-level sky families ``--sky families`` fits: gensky's clear,
-#: intermediate and overcast skies (the shapes of ``--sky auto``'s mixture).
-FAMILIES = AUTO_SKIES
+#: The candidates ``--sky families`` fits: ``"auto"`` (each frame's shape a
+#: mixture of gensky's, its weights inferred per frame) and gensky's clear,
+#: intermediate and overcast skies each all day.
+FAMILIES = ("auto", *AUTO_SKIES)
 
 
 def _pointwise(idata) -> np.ndarray:
@@ -113,9 +117,13 @@ def mixture_draws(draws: list, weights, rng: np.random.Generator) -> np.ndarray:
     return out
 
 
-def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=None):
+def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=None, jobs=1):
     """:func:`~bayesgloss.joint_estimate.joint_fit` under each of :data:`FAMILIES`,
     stacked (module docstring).
+
+    ``jobs`` > 1 fits that many families at once in worker processes
+    (:func:`bayesgloss.pool.process_pool`; the fits are the same, each
+    with ``seed``), ``progress`` then called with (fits done, fits).
 
     Returns
     -------
@@ -131,16 +139,27 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
         Per family: :func:`loo_stacking_weights`'s entries and the quantiles
         of its own ``gamma``; ``seconds`` of all fits.
     """
+    args = (b, curves, y, usable, censored, keep)
     fits = {}
-    for k, name in enumerate(FAMILIES):
-        step = None
-        if progress is not None:
+    if jobs > 1:
+        with process_pool(min(jobs, len(FAMILIES))) as pool:
+            futures = {
+                pool.submit(joint_fit, *args, name, seed, options): name for name in FAMILIES
+            }
+            for done, future in enumerate(as_completed(futures), 1):
+                fits[futures[future]] = future.result()
+                if progress is not None:
+                    progress(done, len(FAMILIES))
+    else:
+        for k, name in enumerate(FAMILIES):
+            step = None
+            if progress is not None:
 
-            def step(done, total, k=k):
-                progress(k * total + done, len(FAMILIES) * total)
+                def step(done, total, k=k):
+                    progress(k * total + done, len(FAMILIES) * total)
 
-        fits[name] = joint_fit(b, curves, y, usable, censored, keep, name, seed, options, step)
-    scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+            fits[name] = joint_fit(*args, name, seed, options, step)
+    scores = loo_stacking_weights({name: fits[name][0] for name in FAMILIES})
     weights = np.array([scores[name]["weight"] for name in FAMILIES])
     best = FAMILIES[int(np.argmax(weights))]
     idata, samples, used = fits[best]

@@ -49,7 +49,13 @@ HERE = Path(__file__).parent
 #: after its first run (``configs/validation_holdout.json``).
 SETS = {"validation_set": "validation_radiance", "validation_holdout": "validation_holdout"}
 RESULTS = HERE / "results"
-METHODS = ("baseline", "fixed", "per-frame")
+METHODS = ("baseline", "fixed", "per-frame", "families")
+#: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
+ESTIMATES = {
+    "fixed": {"per_frame": False},
+    "per-frame": {"per_frame": True},
+    "families": {"per_frame": True, "illumination": "families"},
+}
 
 
 def direct_sun(truth: dict) -> bool:
@@ -85,13 +91,12 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         t0 = time.perf_counter()
         base = baseline.bundle_peak_frame_gloss(b)
         out["baseline"] = {"median": float(base.object_gloss), "seconds": time.perf_counter() - t0}
-    for name, per_frame in (("fixed", False), ("per-frame", True)):
+    for name, kwargs in ESTIMATES.items():
         if name not in methods:
             continue
+        per_frame = kwargs["per_frame"]
         t0 = time.perf_counter()
-        res = estimate.estimate_bundle(
-            b, per_frame=per_frame, sampler_options={"max_steps": max_sweeps}
-        )
+        res = estimate.estimate_bundle(b, **kwargs, sampler_options={"max_steps": max_sweeps})
         obj = res.summary["object"]
         out[name] = {
             **{k: obj["gamma"][k] for k in ("median", "q05", "q95", "hdi90")},
@@ -108,16 +113,25 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
                 out[name][f"{v}_q05"] = [f[v]["q05"] for f in frames]
                 out[name][f"{v}_q95"] = [f[v]["q95"] for f in frames]
             out[name]["sky_models"] = res.summary.get("sky_models")
+        if "sky_families" in res.summary:
+            out[name]["sky_families"] = res.summary["sky_families"]
     return out
 
 
-def _cached(path: Path, max_sweeps: int, redo=(), scores: Path | None = None) -> dict:
+def _cached(
+    path: Path, max_sweeps: int, redo=(), scores: Path | None = None, committed: dict | None = None
+) -> dict:
     """The scores of one bundle, from the cache in ``scores`` where it has
-    them; the methods in ``redo`` (and any the cache lacks) computed afresh."""
+    them, else from ``committed`` (the set's committed results, by bundle
+    name: a fresh checkout recomputes only what they lack); the methods in
+    ``redo`` (and any the cache lacks) computed afresh."""
     scores = scores or path.parent.parent / "scores"
     scores.mkdir(parents=True, exist_ok=True)
     file = scores / f"{path.name}.json"
-    out = json.loads(file.read_text()) if file.exists() else {}
+    if file.exists():
+        out = json.loads(file.read_text())
+    else:
+        out = dict((committed or {}).get(path.name, {}))
     todo = [m for m in METHODS if m in redo or m not in out]
     if todo:
         out = score_bundle(str(path), max_sweeps, todo, out)
@@ -173,10 +187,12 @@ def figure(scores: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4.5), sharey=True)
+    fig, axes = plt.subplots(1, len(METHODS), figsize=(4.3 * len(METHODS), 4.5), sharey=True)
     cats = sorted({s["category"] for s in scores})
     colours = dict(zip(cats, plt.cm.tab10(np.arange(len(cats))), strict=False))
     for ax, m in zip(axes, METHODS, strict=True):
+        if not any(m in s for s in scores):
+            ax.set_title(f"{m} (not run)")
         for s in scores:
             if s["truth"] is None or m not in s:
                 continue
@@ -296,9 +312,22 @@ def main(argv=None) -> None:
     bundles = HERE / "out" / args.set / "bundles"
     name = SETS[args.set]
     paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
+    results = RESULTS / f"{name}.json"
+    committed = {}
+    if results.exists():
+        committed = {s["bundle"]: s for s in json.loads(results.read_text())["sequences"]}
     with ProcessPoolExecutor(args.jobs) as pool:
         n = len(paths)
-        scores = list(pool.map(_cached, paths, [args.max_sweeps] * n, [args.redo] * n))
+        scores = list(
+            pool.map(
+                _cached,
+                paths,
+                [args.max_sweeps] * n,
+                [args.redo] * n,
+                [None] * n,
+                [committed] * n,
+            )
+        )
     RESULTS.mkdir(exist_ok=True)
     summary = {
         "max_sweeps": args.max_sweeps,
