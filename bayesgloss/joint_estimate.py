@@ -27,6 +27,7 @@ __all__ = [
     "bundle_sky",
     "joint_inputs",
     "joint_fit",
+    "add_facet_posteriors",
     "frame_summary",
     "sky_model_summary",
     "posterior_quantiles",
@@ -84,10 +85,17 @@ def joint_inputs(b, y, usable, censored, keep, illumination):
     return data, used, names
 
 
-def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options, progress=None):
+def joint_fit(
+    b, curves, y, usable, censored, keep, illumination, seed, options, progress=None, facets=True
+):
     """The joint model of facets and per-frame illumination
     (:mod:`bayesgloss.illumination`) on the usable facets and the frames
-    any of them sees: (idata, samples, frames used)."""
+    any of them sees: (idata, samples, frames used).
+
+    ``facets=False`` leaves out each facet's own posterior given the
+    object's illumination (:func:`add_facet_posteriors` adds it later: the
+    stacked sky families need it of one fit only).
+    """
     az = arviz()
     data, used, names = joint_inputs(b, y, usable, censored, keep, illumination)
     options = dict(options or {})
@@ -106,27 +114,18 @@ def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options,
     frames = samples.frames  # (E, S, T, L)
     ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
     pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
-    facet_draws, facet_run = sampling.facets_given_frames(
-        data, frames, seed=seed, max_steps=FACETS_GIVEN_FRAMES_STEPS
-    )
-    fd = facet_draws.transpose(1, 2, 0, 3)  # (E, S', F, 4)
     hyper = samples.material  # (E, S, 4)
     post = {
         "gamma_object": th[:, 0, :, 0],
         "n_object": np.exp(th[:, 0, :, 1]),
         "albedo_spread": np.exp(hyper[..., 1]),
         "sun_state_weight": np.exp(il.log_sun_weights(hyper)),
-        "gamma": fd[..., 0],
-        "n": np.exp(fd[..., 1]),
-        "s": np.exp(fd[..., 2]),
-        "sigma": np.exp(fd[..., 3]),
         "sun": np.exp(frames[..., 1]),
         "sky": np.exp(frames[..., 2]),
     }
     if data.log_exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
     dims = {
-        **{v: ["facet"] for v in ("gamma", "n", "s", "sigma")},
         **{v: ["frame"] for v in ("sun", "sky", "exposure")},
         "sun_state_weight": ["sun_state"],
         "y": ["facet", "frame"],
@@ -143,7 +142,8 @@ def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options,
     # each draw's log posterior density (up to a constant), sigma at its draw
     lp = np.nansum(ll, axis=(2, 3)) + il.log_prior_material(th, hyper, data)
     lp += il.log_prior_frames(frames, data, il.log_sun_weights(hyper)).sum(-1)
-    samples.facets = facet_run
+    samples.data = data
+    samples.facets = None
     idata = az.from_dict(
         posterior=post,
         log_likelihood={"y": ll},
@@ -159,7 +159,25 @@ def joint_fit(b, curves, y, usable, censored, keep, illumination, seed, options,
         ("frame",),
         b.times[used].tz_convert("UTC").tz_localize(None),
     )
+    if facets:
+        add_facet_posteriors(idata, samples, seed)
     return idata, samples, used
+
+
+def add_facet_posteriors(idata, samples, seed) -> None:
+    """Each facet's own posterior given the object's illumination draws
+    (:func:`bayesgloss.sampling.facets_given_frames`) into ``idata``'s
+    posterior (``gamma``, ``n``, ``s``, ``sigma`` per facet) and its run
+    into ``samples.facets``."""
+    facet_draws, facet_run = sampling.facets_given_frames(
+        samples.data, samples.frames, seed=seed, max_steps=FACETS_GIVEN_FRAMES_STEPS
+    )
+    fd = facet_draws.transpose(1, 2, 0, 3)  # (E, S', F, 4)
+    values = {"gamma": fd[..., 0], "n": np.exp(fd[..., 1]), "s": np.exp(fd[..., 2])}
+    values["sigma"] = np.exp(fd[..., 3])
+    for name, v in values.items():
+        idata.posterior[name] = (("chain", "draw", "facet"), v)
+    samples.facets = facet_run
 
 
 def frame_summary(idata, b, used) -> list:

@@ -45,7 +45,7 @@ import numpy as np
 
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
-from .joint_estimate import AUTO_SKIES, joint_fit
+from .joint_estimate import AUTO_SKIES, add_facet_posteriors, joint_fit
 from .loo import loo_table
 from .pool import process_pool
 
@@ -144,7 +144,8 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
     if jobs > 1:
         with process_pool(min(jobs, len(FAMILIES))) as pool:
             futures = {
-                pool.submit(joint_fit, *args, name, seed, options): name for name in FAMILIES
+                pool.submit(joint_fit, *args, name, seed, options, facets=False): name
+                for name in FAMILIES
             }
             for done, future in enumerate(as_completed(futures), 1):
                 fits[futures[future]] = future.result()
@@ -158,11 +159,12 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
                 def step(done, total, k=k):
                     progress(k * total + done, len(FAMILIES) * total)
 
-            fits[name] = joint_fit(*args, name, seed, options, step)
+            fits[name] = joint_fit(*args, name, seed, options, step, facets=False)
     scores = loo_stacking_weights({name: fits[name][0] for name in FAMILIES})
     weights = np.array([scores[name]["weight"] for name in FAMILIES])
     best = FAMILIES[int(np.argmax(weights))]
     idata, samples, used = fits[best]
+    add_facet_posteriors(idata, samples, seed)  # of the most-weighted family only
     rng = np.random.default_rng(seed)
     for var in ("gamma_object", "n_object"):
         mixed = mixture_draws([fits[n][0].posterior[var].values for n in FAMILIES], weights, rng)
@@ -174,5 +176,5 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
         }
         for name in FAMILIES
     }
-    seconds = sum(fit[1].seconds + fit[1].facets.seconds for fit in fits.values())
+    seconds = sum(fit[1].seconds for fit in fits.values()) + samples.facets.seconds
     return idata, samples, used, {"families": families, "most_weight": best, "seconds": seconds}

@@ -86,6 +86,11 @@ class JointSamples:
     seconds : float
     material : ndarray (E, S, 2) or None
         The one-material model's m and log tau (:mod:`bayesgloss.sampling.material`).
+    data : bayesgloss.illumination.JointData or None
+        The data sampled (set by :func:`bayesgloss.joint_estimate.joint_fit`).
+    facets : bayesgloss.sampling.PosteriorSamples or None
+        The run of each facet's own sampler given these draws
+        (:func:`facets_given_frames`), where it was run.
     """
 
     draws: np.ndarray
@@ -99,6 +104,8 @@ class JointSamples:
     seconds: float
     parameters: tuple = ("gamma", "log_n", "log_s", "log_sigma")
     material: np.ndarray | None = None
+    data: object = None
+    facets: object = None
 
 
 class _JointChain:
