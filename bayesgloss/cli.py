@@ -275,6 +275,10 @@ def _print_estimate(name, summary) -> None:
         f"object gamma {g['median']:.3f} [90 %: {_interval(g)}], "
         f"{o['facets_converged']}/{o['facets']} facets converged"
     )
+    if "sky_families" in summary:  # the stacked day-level sky families
+        fam = summary["sky_families"]["families"]
+        weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
+        print(f"sky families (stacking weight): {weights}")
     print(f"{'facet':>6} {'gamma':>6} {'90 % interval':>13}  flags")
     for f in summary["facets"]:
         if f["gamma"] is None:

@@ -11,6 +11,7 @@ table when one was run.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -269,7 +270,13 @@ def _illumination_panel(ax, idata) -> None:
         ax.plot(frames, mid, "o-", color=colour, ms=3, label=f"{name} (x model)")
     ax.set_yscale("log")
     ax.set(xlabel="frame", ylabel="relative to the sky model [-]")
-    ax.set_title("(h) each frame's illumination, inferred with the facets (90 %)", fontsize=9)
+    title = "(h) each frame's illumination, inferred with the facets (90 %)"
+    if "sky_family_weights" in idata.posterior.attrs:  # stacked day-level families
+        weights = json.loads(idata.posterior.attrs["sky_family_weights"])
+        title += "\nsky families (stacking weight): " + ", ".join(
+            f"{name} {w:.2f}" for name, w in weights.items()
+        )
+    ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8, loc="lower left")
     if "sky_weight" in idata.posterior:  # the sky models' weights, posterior means
         weights = idata.posterior["sky_weight"]

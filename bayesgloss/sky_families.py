@@ -39,6 +39,7 @@ mixture carries both.
 
 from __future__ import annotations
 
+import json
 from concurrent.futures import as_completed
 
 import numpy as np
@@ -130,7 +131,9 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
     idata : arviz.InferenceData
         The most-weighted family's, its ``gamma_object`` and ``n_object``
         replaced by the stacked mixture's draws (the facets' and the
-        frames' answers are that family's).
+        frames' answers are that family's); the posterior's attributes
+        ``sky_family_weights`` (JSON: family to stacking weight) and
+        ``sky_family_most_weight``.
     samples : bayesgloss.sampling.JointSamples
         The most-weighted family's run.
     used : ndarray of bool
@@ -169,6 +172,10 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
     for var in ("gamma_object", "n_object"):
         mixed = mixture_draws([fits[n][0].posterior[var].values for n in FAMILIES], weights, rng)
         idata.posterior[var] = (idata.posterior[var].dims, mixed)
+    idata.posterior.attrs["sky_family_weights"] = json.dumps(
+        {name: float(w) for name, w in zip(FAMILIES, weights, strict=True)}
+    )
+    idata.posterior.attrs["sky_family_most_weight"] = best
     families = {
         name: {
             **scores[name],

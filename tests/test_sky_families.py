@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -37,20 +39,26 @@ def test_loo_stacking_prefers_the_model_that_predicts(tmp_path):
     assert scores["good"]["elpd_loo"] - scores["bad"]["elpd_loo"] == pytest.approx(180, rel=0.01)
 
 
-def test_overcast_day_is_told_overcast(tmp_path):
+def test_overcast_day_is_told_overcast(tmp_path, capsys):
     # a small bundle made by the forward model under gensky's overcast sky: of
-    # the three day-level families the overcast fit must carry the weight (a
-    # wrong family on an overcast day read gamma 0.008 for a true 0.88 on a
-    # Radiance render, stop 27), and the object's answer is its mixture
+    # the four candidates the overcast fit must carry the weight (a wrong
+    # family on an overcast day read gamma 0.008 for a true 0.88 on a
+    # Radiance render, stop 27, and the per-frame mixture 1.00), and the
+    # object's answer is its mixture. Two worker processes (estimate's
+    # default --jobs), the weights kept in the result folder and shown
     from conftest import make_synthetic_bundle
+
+    from bayesgloss import bundle as bundle_io
+    from bayesgloss import cli, report
 
     path = make_synthetic_bundle(
         tmp_path / "b", specularity=0.5, noise=0.01, seed=6, sky_model="gensky-overcast"
     )
     res = estimate.estimate_bundle(
-        path, per_frame=True, illumination="families", sampler_options={"max_steps": 400}
+        path, per_frame=True, illumination="families", jobs=2, sampler_options={"max_steps": 400}
     )
     fam = res.summary["sky_families"]
+    assert set(fam["families"]) == set(sky_families.FAMILIES)
     assert fam["most_weight"] == "gensky-overcast"
     weights = {name: f["weight"] for name, f in fam["families"].items()}
     assert sum(weights.values()) == pytest.approx(1.0)
@@ -58,6 +66,16 @@ def test_overcast_day_is_told_overcast(tmp_path):
     assert res.summary["sampler"]["model"].startswith("joint, one fit per sky family")
     gamma = res.idata.posterior["gamma_object"].values
     assert np.median(gamma) == pytest.approx(res.summary["object"]["gamma"]["median"])
+    # each facet's own posterior given the light: of the most-weighted fit only
+    assert res.idata.posterior["gamma"].shape[-1] == res.summary["object"]["facets"]
+    out = estimate.write_result(tmp_path / "out", res)
+    back = estimate.read_result(out)
+    stored = json.loads(back.idata.posterior.attrs["sky_family_weights"])
+    assert stored == pytest.approx(weights)
+    cli._print_estimate("b", res.summary)
+    assert "sky families (stacking weight): auto" in capsys.readouterr().out
+    png = report.posterior_report(bundle_io.read_bundle(path), back, path=tmp_path / "r.png")
+    assert png.stat().st_size > 10_000
 
 
 def test_stacking_weights_of_two_complementary_models():
