@@ -342,3 +342,34 @@ def test_ridge_jump_is_exact_with_an_offset_and_narrow_proposal():
     np.testing.assert_allclose([u1.mean(), u1.std()], [0.0, u_sd], atol=0.05 * u_sd)
     np.testing.assert_allclose([x[:, 2].mean(), x[:, 2].std()], [-0.2, u_sd], atol=0.05 * u_sd)
     assert 0.2 < acc.mean() < 0.9
+
+
+def test_proposal_square_root_of_a_matrix_rounding_made_indefinite():
+    # the frame move's proposal covariance (info + diag(prior))^-1: its
+    # Cholesky factor where it exists, and a square root from the floored
+    # eigendecomposition where rounding (a 1e12 precision of a fixed latent
+    # beside data of order 1e-4) or a non-finite entry made it fail; a
+    # holdout run stopped on such a matrix (stop 28)
+    from bayesgloss.sampling.joint import proposal_square_root
+
+    prior = np.array([1e12, 1 / 1.5**2, 1 / 0.7**2, 1e12])
+    g = np.array([[1.0, 2.0, 3.0, 0.0], [0.5, 0.1, 2.0, 0.0], [2.0, 1.0, 0.2, 0.0]])
+    good = g.T @ g
+    m = proposal_square_root(good, prior)
+    exact = np.linalg.inv(good + np.diag(prior))
+    assert np.allclose(m @ m.T, exact, rtol=1e-9, atol=1e-15)
+    assert np.allclose(m, np.tril(m))  # the Cholesky factor where it exists
+    bad = good.copy()
+    bad[1, 2] = bad[2, 1] = 1e9  # indefinite: a 2x2 minor of determinant < 0
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(np.linalg.inv(bad + np.diag(prior)))
+    m = proposal_square_root(bad, prior)
+    cov = m @ m.T
+    assert np.all(np.isfinite(m))
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert np.linalg.eigvalsh(cov).max() <= 1 / prior.min() * (1 + 1e-12)
+    nan = good.copy()
+    nan[0, 1] = nan[1, 0] = np.inf
+    m = proposal_square_root(np.stack([good, nan]), prior)  # batched, one bad matrix
+    assert np.all(np.isfinite(m))
+    assert np.allclose(m[0] @ m[0].T, exact, rtol=1e-9, atol=1e-15)

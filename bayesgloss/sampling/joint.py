@@ -108,6 +108,32 @@ class JointSamples:
     facets: object = None
 
 
+def proposal_square_root(info, prior) -> np.ndarray:
+    """A square root M of (info + diag(prior))^-1 (M M^T the inverse), (..., L, L).
+
+    ``info`` is a Gauss-Newton information matrix of the data (positive
+    semi-definite in exact arithmetic) and ``prior`` the positive diagonal
+    of the priors' precisions. The Cholesky factor of the inverse where it
+    exists; where rounding made a matrix indefinite (a huge precision for a
+    latent held fixed beside data of another scale: a holdout sequence
+    under a fixed gensky shape stopped a run, stop 28), or ``info`` is not
+    finite, the
+    symmetric square root from the eigendecomposition with every eigenvalue
+    floored at the smallest prior precision, the least the exact matrix can
+    have (non-finite entries of ``info`` set to 0 first).
+    """
+    full = info + np.diag(prior)
+    try:
+        return np.linalg.cholesky(np.linalg.inv(full))
+    except np.linalg.LinAlgError:
+        pass
+    info = np.where(np.isfinite(info), info, 0.0)
+    full = 0.5 * (info + np.swapaxes(info, -1, -2)) + np.diag(prior)
+    values, vectors = np.linalg.eigh(full)
+    values = np.maximum(values, np.min(prior))
+    return vectors / np.sqrt(values)[..., None, :]
+
+
 class _JointChain:
     """The state of E ensembles of W walkers and one sweep of the moves."""
 
@@ -244,7 +270,7 @@ class _JointChain:
         fp = data.frame_priors
         fixed = 1e12
         ratio = 1.0 / 1.8**2 if data.shapes >= 2 else fixed  # ~ the logistic's sd
-        info += np.diag(
+        prior = np.array(
             [
                 fixed if data.exposure_known else 1.0 / fp.exposure_sd**2,
                 1.0 / fp.sun_cloud_sd**2,
@@ -252,7 +278,7 @@ class _JointChain:
                 *[ratio] * (data.n_latents - 3),
             ]
         )
-        return np.linalg.cholesky(np.linalg.inv(info))
+        return proposal_square_root(info, prior)
 
     # -- collective moves: along the directions Gibbs is slow in ----------------
 
