@@ -262,11 +262,12 @@ def default_illumination(
     b, *, per_frame: bool = True, noise: str = "relative", camera: str = "auto"
 ) -> str:
     """The sky :func:`estimate_bundle` uses where none is named: ``"measured"``
-    where the bundle measures every frame with the sun up, else ``"auto"``
-    where the joint model applies and ``"gensky-clear"`` where it does not."""
+    where the bundle measures every frame with the sun up, else
+    ``"families"`` (:mod:`bayesgloss.sky_families`) where the joint model
+    applies and ``"gensky-clear"`` where it does not."""
     if measured_sky(b, b.ground_albedo) is not None:
         return "measured"
-    return "auto" if _joint_possible(per_frame, noise, _camera(b, camera)) else "gensky-clear"
+    return "families" if _joint_possible(per_frame, noise, _camera(b, camera)) else "gensky-clear"
 
 
 def estimate_bundle(
@@ -295,7 +296,7 @@ def estimate_bundle(
         :data:`bayesgloss.sky_families.FAMILIES`, stacked by PSIS-LOO,
         :mod:`bayesgloss.sky_families`). Default: ``"measured"``
         where the bundle measures every frame with the sun up, else
-        ``"auto"`` with ``per_frame`` and ``"gensky-clear"`` without.
+        ``"families"`` with ``per_frame`` and ``"gensky-clear"`` without.
     per_frame : bool
         Infer each frame's sun and sky brightness (and the exposure where
         the bundle does not fix it) jointly with the facets

@@ -189,7 +189,7 @@ def unknown_response_bundle(tmp_path_factory):
 def test_default_sky_follows_whether_the_joint_model_applies(unknown_response_bundle, tmp_path):
     # one rule for estimate_bundle and the several-bundle command line's units:
     # an unknown pixel response or a non-relative noise model rules the joint
-    # model out, and with it the per-frame 'auto' sky (naming 'auto' for such a
+    # model out, and with it the stacked sky families (naming 'auto' for such a
     # bundle made its unit fail)
     from conftest import make_synthetic_bundle
 
@@ -197,9 +197,9 @@ def test_default_sky_follows_whether_the_joint_model_applies(unknown_response_bu
 
     unknown = bundle.read_bundle(unknown_response_bundle)
     known = bundle.read_bundle(make_synthetic_bundle(tmp_path / "b"))
-    assert estimate.default_illumination(known) == "auto"
+    assert estimate.default_illumination(known) == "families"
     assert estimate.default_illumination(unknown) == "gensky-clear"
-    assert estimate.default_illumination(unknown, camera="linear") == "auto"
+    assert estimate.default_illumination(unknown, camera="linear") == "families"
     assert estimate.default_illumination(known, per_frame=False) == "gensky-clear"
     assert estimate.default_illumination(known, noise="student") == "gensky-clear"
 
