@@ -444,10 +444,12 @@ def _parser() -> argparse.ArgumentParser:
         choices=("auto", "families", "measured", *sky.sky_models()),
         metavar="SKY",
         help="the sky's shape (default: 'measured', the Perez sky of the bundle's "
-        "frames[].irradiance, where it has them; else gensky-clear, or with --per-frame "
-        "'auto', each frame's sky a mixture of gensky's clear, intermediate and overcast "
-        "skies; 'families': one fit per day-level gensky family, stacked by PSIS-LOO "
-        "(bayesgloss.sky_families); one of " + ", ".join(sky.sky_models()) + ")",
+        "frames[].irradiance, where it has them; else 'families': the object fitted with "
+        "each frame's sky a mixture of gensky's clear, intermediate and overcast skies "
+        "('auto') and under each of the three all day, the four fits stacked by PSIS-LOO "
+        "(bayesgloss.sky_families); gensky-clear with --fixed-brightness; or one of "
+        + ", ".join(sky.sky_models())
+        + ")",
     )
     es.add_argument("--camera", default="auto", choices=["auto", "linear", "power"])
     es.add_argument("--noise", default="relative", choices=["relative", "gaussian", "student"])

@@ -17,7 +17,12 @@ exposure) inferred with them; the posterior groups hold ``gamma_object``,
 ``n_object``, ``albedo_spread`` (tau) and ``sun_state_weight`` (the day's
 clear, dimmed and hidden sun). Each facet's own posterior (``gamma``...)
 is its sampler's given the object's illumination, averaged over it
-(:func:`bayesgloss.sampling.facets_given_frames`). The summaries below are
+(:func:`bayesgloss.sampling.facets_given_frames`). Where no sky is named,
+that model is fitted four times, under the per-frame mixture of sky
+shapes and under each of gensky's clear, intermediate and overcast skies
+all day, and the object's gamma and n are the fits' mixture with their
+PSIS-LOO stacking weights (:mod:`bayesgloss.sky_families`; the facets'
+and frames' answers are the most-weighted fit's). The summaries below are
 kept beside it (a facet population's mu misled on overcast days: the
 facets' posteriors share the frames, and their product read confident
 answers the data did not hold).
