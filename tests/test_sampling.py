@@ -350,7 +350,7 @@ def test_proposal_square_root_of_a_matrix_rounding_made_indefinite():
     # eigendecomposition where rounding (a 1e12 precision of a fixed latent
     # beside data of order 1e-4) or a non-finite entry made it fail; a
     # holdout run stopped on such a matrix (stop 28)
-    from bayesgloss.sampling.joint import proposal_square_root
+    from bayesgloss.sampling.moves import proposal_square_root
 
     prior = np.array([1e12, 1 / 1.5**2, 1 / 0.7**2, 1e12])
     g = np.array([[1.0, 2.0, 3.0, 0.0], [0.5, 0.1, 2.0, 0.0], [2.0, 1.0, 0.2, 0.0]])

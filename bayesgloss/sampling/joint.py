@@ -51,7 +51,7 @@ from .. import illumination as il
 from .. import likelihood as lk
 from .coordinates import node_fits
 from .ensemble import BatchedEnsemble
-from .moves import DEFAULT_MOVES
+from .moves import DEFAULT_MOVES, proposal_square_root
 from .starts import initial_ensemble
 
 __all__ = ["JointSamples", "sample_joint"]
@@ -106,32 +106,6 @@ class JointSamples:
     material: np.ndarray | None = None
     data: object = None
     facets: object = None
-
-
-def proposal_square_root(info, prior) -> np.ndarray:
-    """A square root M of (info + diag(prior))^-1 (M M^T the inverse), (..., L, L).
-
-    ``info`` is a Gauss-Newton information matrix of the data (positive
-    semi-definite in exact arithmetic) and ``prior`` the positive diagonal
-    of the priors' precisions. The Cholesky factor of the inverse where it
-    exists; where rounding made a matrix indefinite (a huge precision for a
-    latent held fixed beside data of another scale: a holdout sequence
-    under a fixed gensky shape stopped a run, stop 28), or ``info`` is not
-    finite, the
-    symmetric square root from the eigendecomposition with every eigenvalue
-    floored at the smallest prior precision, the least the exact matrix can
-    have (non-finite entries of ``info`` set to 0 first).
-    """
-    full = info + np.diag(prior)
-    try:
-        return np.linalg.cholesky(np.linalg.inv(full))
-    except np.linalg.LinAlgError:
-        pass
-    info = np.where(np.isfinite(info), info, 0.0)
-    full = 0.5 * (info + np.swapaxes(info, -1, -2)) + np.diag(prior)
-    values, vectors = np.linalg.eigh(full)
-    values = np.maximum(values, np.min(prior))
-    return vectors / np.sqrt(values)[..., None, :]
 
 
 class _JointChain:

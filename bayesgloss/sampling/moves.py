@@ -40,6 +40,7 @@ __all__ = [
     "MOVE_NAMES",
     "move_named",
     "DEFAULT_MOVES",
+    "proposal_square_root",
     "FACET_MOVES",
     "PLAIN_JUMP",
 ]
@@ -140,3 +141,29 @@ def move_named(name: str, stretch_a: float = 2.0):
     if name == "ridge-jump":
         return RidgeJumpMove()
     raise ValueError(f"unknown move {name!r}; valid: {', '.join(MOVE_NAMES)}")
+
+
+def proposal_square_root(info, prior) -> np.ndarray:
+    """A square root M of (info + diag(prior))^-1 (M M^T the inverse), (..., L, L).
+
+    ``info`` is a Gauss-Newton information matrix of the data (positive
+    semi-definite in exact arithmetic) and ``prior`` the positive diagonal
+    of the priors' precisions. The Cholesky factor of the inverse where it
+    exists; where rounding made a matrix indefinite (a huge precision for a
+    latent held fixed beside data of another scale: a holdout sequence
+    under a fixed gensky shape stopped a run, stop 28), or ``info`` is not
+    finite, the
+    symmetric square root from the eigendecomposition with every eigenvalue
+    floored at the smallest prior precision, the least the exact matrix can
+    have (non-finite entries of ``info`` set to 0 first).
+    """
+    full = info + np.diag(prior)
+    try:
+        return np.linalg.cholesky(np.linalg.inv(full))
+    except np.linalg.LinAlgError:
+        pass
+    info = np.where(np.isfinite(info), info, 0.0)
+    full = 0.5 * (info + np.swapaxes(info, -1, -2)) + np.diag(prior)
+    values, vectors = np.linalg.eigh(full)
+    values = np.maximum(values, np.min(prior))
+    return vectors / np.sqrt(values)[..., None, :]
