@@ -244,6 +244,7 @@ def _estimate(args: argparse.Namespace) -> int:
         progress=progress,
         per_frame=args.per_frame,
         sampler_options={"max_steps": args.max_steps},
+        fresnel=args.fresnel,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -399,8 +400,71 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bundle_make(args: argparse.Namespace) -> int:
+    """``bundle make``: a sequence bundle from a mesh, a camera file and photos."""
+    import time
+
+    import numpy as np
+
+    from . import capture
+
+    transform = None
+    if args.mesh_transform:
+        transform = _transform(args.mesh_transform)
+    t0 = time.perf_counter()
+    made = capture.make_bundle(
+        args.mesh,
+        args.camera,
+        args.photos,
+        args.out,
+        utc_offset=args.utc_offset,
+        latitude=args.latitude,
+        longitude=args.longitude,
+        elevation=args.elevation,
+        facet_angle=args.facet_angle,
+        min_facet_pixels=args.min_facet_pixels,
+        transform=transform,
+        pixel_encoding=args.pixel_encoding,
+        overwrite=args.overwrite,
+    )
+    labelled = int(np.count_nonzero(made.labels))
+    print(
+        f"bundle {made.path}: {len(made.times)} frames "
+        f"({made.times[0].isoformat()} to {made.times[-1].isoformat()} UTC), "
+        f"{len(made.facets)} facets seen of {made.regions} near-planar regions, "
+        f"{labelled} labelled pixels, exposure "
+        + ("from EXIF" if made.exposure is not None else "unknown")
+        + f"; {time.perf_counter() - t0:.1f} s"
+    )
+    return 0
+
+
+def _transform(text: str):
+    """A 4 x 4 transform: 16 comma-separated numbers (row by row) or a JSON file of them."""
+    import json
+
+    import numpy as np
+
+    from .capture import CaptureError
+
+    path = Path(text)
+    try:
+        if path.is_file():
+            values = json.loads(path.read_text(encoding="utf-8"))
+        else:
+            values = [float(v) for v in text.split(",")]
+        matrix = np.asarray(values, dtype=float).reshape(4, 4)
+    except (ValueError, TypeError, OSError) as err:
+        raise CaptureError(
+            "transform", text, "--mesh-transform", f"not 16 numbers (a 4 x 4 matrix): {err}"
+        ) from None
+    return matrix
+
+
 def _parser() -> argparse.ArgumentParser:
     from . import sky
+    from .fresnel import FRESNEL_MODELS
+    from .joint_estimate import DEFAULT_FRESNEL
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -489,6 +553,16 @@ def _parser() -> argparse.ArgumentParser:
         "sample the facets alone (the estimator before per-frame illumination; seconds, "
         "not a minute, and confidently wrong when the day was not the sky model's)",
     )
+    es.add_argument(
+        "--fresnel",
+        default=None,
+        choices=FRESNEL_MODELS,
+        help="the one-material model's Fresnel term (default "
+        f"{DEFAULT_FRESNEL!r}): 'radiance' raises the glossy part toward grazing views by "
+        "Radiance's Fresnel estimate, with its strength (0: Radiance's rough materials, "
+        "1: smooth ones and real surfaces) and the normal-incidence albedo inferred "
+        "(bayesgloss.fresnel)",
+    )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")
     es.add_argument("--quiet", action="store_true", help="no progress line")
@@ -519,6 +593,68 @@ def _parser() -> argparse.ArgumentParser:
     cm.add_argument("--seed", type=int, default=0)
     cm.add_argument("--json", action="store_true", help="machine-readable output")
     cm.set_defaults(func=_compare)
+    bu = sub.add_parser("bundle", help="make sequence bundles")
+    bsub = bu.add_subparsers(dest="action", required=True)
+    mk = bsub.add_parser(
+        "make",
+        help="a bundle from a mesh, a camera file and photos with EXIF times",
+        description="Write a sequence bundle from a triangle mesh of the object, an OpenCV "
+        "camera file (JSON) and photos with EXIF times (bayesgloss.capture).",
+    )
+    mk.add_argument(
+        "--mesh",
+        required=True,
+        help="OBJ, PLY or STL, world frame (x east, y north, z up, metres) unless --mesh-transform",
+    )
+    mk.add_argument(
+        "--camera",
+        required=True,
+        help="camera JSON file (fx, fy, cx, cy, width, "
+        "height, distortion, rotation, position; see bayesgloss.capture)",
+    )
+    mk.add_argument(
+        "--photos",
+        required=True,
+        nargs="+",
+        metavar="DIR_OR_FILE",
+        help="photo files or folders of them (JPEG, PNG, TIFF)",
+    )
+    mk.add_argument("--out", required=True, help="the bundle folder to write")
+    mk.add_argument(
+        "--utc-offset",
+        metavar="+HH:MM",
+        help="the camera clock's UTC offset, for photos whose EXIF has none",
+    )
+    mk.add_argument("--latitude", type=float, help="site, deg north (default: EXIF GPS)")
+    mk.add_argument("--longitude", type=float, help="site, deg east (default: EXIF GPS)")
+    mk.add_argument("--elevation", type=float, help="site, m (default: EXIF GPS, else 0)")
+    mk.add_argument(
+        "--facet-angle",
+        type=float,
+        default=10.0,
+        metavar="DEG",
+        help="largest angle between a facet's faces and its seed face (default: 10 deg)",
+    )
+    mk.add_argument(
+        "--min-facet-pixels",
+        type=int,
+        default=10,
+        metavar="N",
+        help="facets with fewer whole, unoccluded pixels are dropped (default: 10)",
+    )
+    mk.add_argument(
+        "--mesh-transform",
+        metavar="M",
+        help="mesh to world: 16 comma-separated numbers, row by row, or a JSON file "
+        "of a 4 x 4 matrix",
+    )
+    mk.add_argument(
+        "--pixel-encoding",
+        default="srgb",
+        help="of PNG and TIFF photos (default: srgb; JPEGs are srgb)",
+    )
+    mk.add_argument("--overwrite", action="store_true", help="replace an existing bundle")
+    mk.set_defaults(func=_bundle_make)
     return p
 
 

@@ -80,10 +80,12 @@ from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky, sky_families
 from . import likelihood as lk
 from ._thirdparty import arviz
+from .fresnel import FRESNEL_MODELS
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
+    DEFAULT_FRESNEL,
     bundle_sky,
     frame_summary,
     joint_fit,
@@ -286,6 +288,7 @@ def estimate_bundle(
     jobs: int = 1,
     progress=None,
     sampler_options: dict | None = None,
+    fresnel: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -321,6 +324,10 @@ def estimate_bundle(
     progress : callable, optional
         Called with (done, total): facets of the fixed-brightness model, or
         sweeps of the joint sampler's cap.
+    fresnel : {"none", "radiance"}, optional
+        The one-material model's Fresnel model (:mod:`bayesgloss.fresnel`;
+        per-frame illumination only); default
+        :data:`bayesgloss.joint_estimate.DEFAULT_FRESNEL`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -335,6 +342,9 @@ def estimate_bundle(
     """
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
     sampler_options = {k: v for k, v in (sampler_options or {}).items() if v is not None}
+    fresnel = fresnel or DEFAULT_FRESNEL
+    if fresnel not in FRESNEL_MODELS:
+        raise ValueError(f"unknown Fresnel model {fresnel!r}; valid: {', '.join(FRESNEL_MODELS)}")
     curves = bundle_io.facet_curves(b)
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)
@@ -347,6 +357,8 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    if joint:
+        sampler_options["fresnel"] = fresnel
     families = None
     if illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
@@ -527,6 +539,10 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         post = idata.posterior
         summary["object"]["n"] = _quantiles(post["n_object"].values)
         summary["object"]["albedo_spread"] = _quantiles(post["albedo_spread"].values)
+        if "fresnel_strength" in post:  # the Fresnel raise's unknowns
+            summary["object"]["fresnel_strength"] = _quantiles(post["fresnel_strength"].values)
+            summary["object"]["normal_albedo"] = _quantiles(post["normal_albedo"].values)
+        summary["fresnel"] = post.attrs.get("fresnel", "none")
         states = post["sun_state_weight"].values.mean(axis=(0, 1))
         summary["sun_state"] = {
             str(k): float(v) for k, v in zip(post["sun_state"].values, states, strict=True)

@@ -73,6 +73,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
+from . import fresnel as fr
 from . import likelihood as lk
 from . import render
 from .gamma_interval import log_gamma_interval, tail_cuts
@@ -167,6 +168,8 @@ class IlluminationBases:
         log of each sky model's own solar radiance over the first's (where
         a model draws no sun, the cloud component's mean of the sun prior):
         where each model would put log a_t, for the starts of the sampler.
+    fresnel : bayesgloss.fresnel.FresnelTerms or None
+        The geometry's Fresnel estimates (:func:`bayesgloss.fresnel.fresnel_terms`).
     """
 
     diffuse: np.ndarray
@@ -174,6 +177,7 @@ class IlluminationBases:
     exponents: np.ndarray
     shapes: int = 1
     log_sun_ratio: np.ndarray | None = None
+    fresnel: fr.FresnelTerms | None = None
 
     def total(self) -> render.FacetBases:
         """The bases at the model's brightness (a = b = e = 1, even weights)."""
@@ -191,6 +195,7 @@ class IlluminationBases:
             self.exponents,
             self.shapes,
             None if ratio is None else ratio[:, frames],
+            None if self.fresnel is None else self.fresnel.take(facets, frames),
         )
 
 
@@ -243,12 +248,15 @@ def illumination_bases(
             factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)
         d_parts.append(other.diffuse * factor)
         g_parts.append(other.glossy * factor)
+    sun_dir = np.asarray(day.sun_direction, dtype=float)
+    e_sun = np.where(sun_dir[:, 2] > 0, sun_a * day.sun_solid_angle, 0.0)  # render._sun_terms
     return IlluminationBases(
         np.stack(d_parts),
         np.stack(g_parts),
         parts[0].exponents,
         1 + len(others),
         np.stack(ratios),
+        fr.fresnel_terms(geometry, sun_dir, e_sun),
     )
 
 
@@ -276,6 +284,10 @@ class JointData:
         Sky models, K (1: no weights).
     log_sun_ratio : ndarray (K, T) or None
         :attr:`IlluminationBases.log_sun_ratio` (starts only).
+    fresnel : bayesgloss.fresnel.FresnelTerms or None
+        Where set, the one-material model's glossy basis has Radiance's
+        Fresnel raise with an unknown strength and albedo (theta's columns
+        :data:`bayesgloss.fresnel.FRESNEL_COLUMNS`); None: no Fresnel term.
     """
 
     y: np.ndarray
@@ -290,6 +302,7 @@ class JointData:
     frame_priors: IlluminationPriors = field(default_factory=IlluminationPriors)
     shapes: int = 1
     log_sun_ratio: np.ndarray | None = None
+    fresnel: fr.FresnelTerms | None = None
 
     @property
     def sources(self) -> int:
@@ -377,6 +390,7 @@ def joint_data(
     exposure=None,
     priors: lk.Priors | None = None,
     frame_priors: IlluminationPriors | None = None,
+    fresnel: str = "none",
 ) -> JointData:
     """Assemble the joint model's inputs.
 
@@ -393,7 +407,15 @@ def joint_data(
     priors, frame_priors
         Facet and frame priors (defaults: :class:`bayesgloss.likelihood.Priors`,
         :class:`IlluminationPriors`).
+    fresnel : {"none", "radiance"}
+        The one-material model's Fresnel model (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
     """
+    if fresnel not in fr.FRESNEL_MODELS:
+        raise ValueError(
+            f"unknown Fresnel model {fresnel!r}; valid: {', '.join(fr.FRESNEL_MODELS)}"
+        )
+    if fresnel != "none" and bases.fresnel is None:
+        raise ValueError("Fresnel model needs bases with Fresnel terms (illumination_bases)")
     y = np.asarray(y, dtype=float)
     valid = np.asarray(valid, dtype=bool) & np.isfinite(y)
     total = bases.total()
@@ -420,6 +442,7 @@ def joint_data(
         frame_priors or IlluminationPriors(),
         bases.shapes,
         bases.log_sun_ratio,
+        bases.fresnel if fresnel != "none" else None,
     )
 
 
@@ -453,7 +476,9 @@ def material_m_center(data: JointData) -> float:
 
 def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
     """Log prior of the one-material model's facet and day parts, (E, W), for
-    theta (E, F, W, >= 3) (gamma and log n the same for every facet) and
+    theta (E, F, W, >= 3) (gamma and log n the same for every facet; with
+    Fresnel terms, k and log A of :func:`bayesgloss.fresnel.log_prior_fresnel`
+    in its columns 4 and 5) and
     hyper (E, W, 4) = (m, log tau, v_1, v_2): uniform gamma and log n, log
     s_f ~ N(m, tau^2), m ~ N(:func:`material_m_center`, :data:`MATERIAL_M_SD`^2),
     log tau uniform on :data:`MATERIAL_LOG_TAU`, the day's sun weights
@@ -472,6 +497,9 @@ def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
     lp = lp - 0.5 * ((m - material_m_center(data)) / MATERIAL_M_SD) ** 2
     if hyper.shape[-1] > 2:  # the day's sun weights, uniform on the simplex
         lp = lp + np.sum(log_sun_weights(hyper), axis=-1)
+    k_col, a_col = fr.FRESNEL_COLUMNS
+    if data.fresnel is not None and theta.shape[-1] > a_col:  # k and log A, shared
+        lp = lp + fr.log_prior_fresnel(theta[:, 0, :, k_col], theta[:, 0, :, a_col])
     return np.where(inside, lp, -np.inf)
 
 
@@ -548,17 +576,36 @@ def latent_names(data: JointData) -> tuple[str, ...]:
 def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, ...]:
     """S and each sky model's K^k of the module docstring at unit scale, P
     arrays (E, F, W, T), for theta (E, F, W, >= 2); G linear in log n between
-    the table's nodes (with one sky model, its copy second)."""
+    the table's nodes (with one sky model, its copy second). Where the data
+    carry Fresnel terms and theta its columns (k, log A at
+    :data:`bayesgloss.fresnel.FRESNEL_COLUMNS`), with the Fresnel raise of
+    :func:`bayesgloss.fresnel.fresnel_parts`."""
     rows = data.tables if tables is None else tables
     n = len(data.log_n_grid)
     j, w = lk.grid_position(theta[..., 1], data.log_n_grid)  # (E, F, W)
     index = j + (np.arange(data.shape[0]) * n)[None, :, None]
     r = np.take(rows, index.ravel(), axis=0).reshape(*j.shape, 2 * data.sources, -1)
     w, gamma = w[..., None], theta[..., 0:1]
+    sources = data.sources if data.shapes >= 2 else 2
+    glossy_minus_diffuse = [r[..., 2 * p, :] + w * r[..., 2 * p + 1, :] for p in range(sources)]
     parts = [
-        data.diffuse[p][None, :, None, :] + gamma * (r[..., 2 * p, :] + w * r[..., 2 * p + 1, :])
-        for p in range(data.sources if data.shapes >= 2 else 2)
+        data.diffuse[p][None, :, None, :] + gamma * glossy_minus_diffuse[p] for p in range(sources)
     ]
+    k_col, a_col = fr.FRESNEL_COLUMNS
+    if data.fresnel is not None and theta.shape[-1] > a_col:  # the Fresnel raise
+        k, log_a = theta[..., k_col : k_col + 1], theta[..., a_col : a_col + 1]
+        parts = [
+            fr.fresnel_parts(
+                part,
+                data.diffuse[p][None, :, None, :] + glossy_minus_diffuse[p],
+                k,
+                log_a,
+                data.fresnel.view,
+                data.fresnel.sun_direct if p == 0 else None,
+                gamma,
+            )
+            for p, part in enumerate(parts)
+        ]
     return (*parts, parts[1]) if data.shapes == 1 else tuple(parts)
 
 
@@ -711,7 +758,9 @@ def sample_prior_material(
     data: JointData, size: int, rng: np.random.Generator, point_mass: bool = False
 ):
     """Draws from the one-material model's prior (:func:`log_prior_material`):
-    theta (F, size, 4) (gamma, log n and log sigma shared, sigma log-uniform),
+    theta (F, size, 4) (gamma, log n and log sigma shared, sigma log-uniform;
+    (F, size, 6) with the shared Fresnel k and log A where the data carry
+    Fresnel terms),
     hyper (size, 4) and lam (size, T, L), each frame's sun from the day's
     three-part mixture (``point_mass``: a hidden sun log a = -inf, as
     :func:`log_prior_frames`)."""
@@ -732,6 +781,9 @@ def sample_prior_material(
     means = np.array([0.0, q.sun_cloud_mean, hidden_mean])
     sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])
     lam[..., 1] = means[state] + sds[state] * rng.standard_normal((size, t))
+    if data.fresnel is not None:  # k and log A, shared by the facets
+        fres = fr.sample_prior_fresnel(size, rng)
+        th = np.concatenate([th, np.broadcast_to(fres[None], (f, size, 2))], axis=-1)
     return th, hyper, lam
 
 

@@ -17,11 +17,13 @@ import numpy as np
 from . import illumination as il
 from . import sampling, sky
 from ._thirdparty import arviz
+from .fresnel import FRESNEL_COLUMNS
 from .intervals import posterior_quantiles
 from .irradiance import measured_sky
 
 __all__ = [
     "AUTO_SKIES",
+    "DEFAULT_FRESNEL",
     "JOINT_MAX_SWEEPS",
     "FACETS_GIVEN_FRAMES_STEPS",
     "bundle_sky",
@@ -38,6 +40,10 @@ __all__ = [
 #: a clear sky, the broad circumsolar brightening of an intermediate or hazy
 #: one (without it a glossy lobe stands in for it), and an overcast one.
 AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
+
+#: The one-material model's Fresnel model where none is named
+#: (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
+DEFAULT_FRESNEL = "none"
 
 #: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
 #: run stops earlier once converged; otherwise it is flagged ``not-converged``).
@@ -62,10 +68,11 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
     return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
 
 
-def joint_inputs(b, y, usable, censored, keep, illumination):
+def joint_inputs(b, y, usable, censored, keep, illumination, fresnel="none"):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` and the frames any of them sees with the sun
-    up: (data, frames used (T,) of bool, sky model names)."""
+    up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`):
+    (data, frames used (T,) of bool, sky model names)."""
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
@@ -81,7 +88,7 @@ def joint_inputs(b, y, usable, censored, keep, illumination):
         exposure = b.exposure[used]
     elif b.pixel_encoding == "linear-radiance":
         exposure = np.ones(int(used.sum()))
-    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure)
+    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure, fresnel=fresnel)
     return data, used, names
 
 
@@ -97,8 +104,9 @@ def joint_fit(
     stacked sky families need it of one fit only).
     """
     az = arviz()
-    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination)
     options = dict(options or {})
+    fresnel = options.pop("fresnel", DEFAULT_FRESNEL)
+    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination, fresnel)
     if "max_steps" in options:  # a sweep of the joint sampler is its step
         options.setdefault("max_sweeps", options.pop("max_steps"))
     options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
@@ -125,6 +133,10 @@ def joint_fit(
     }
     if data.log_exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
+    if data.fresnel is not None:  # the Fresnel raise's strength and normal-incidence albedo
+        k_col, a_col = FRESNEL_COLUMNS
+        post["fresnel_strength"] = th[:, 0, :, k_col]
+        post["normal_albedo"] = np.exp(th[:, 0, :, a_col])
     dims = {
         **{v: ["frame"] for v in ("sun", "sky", "exposure")},
         "sun_state_weight": ["sun_state"],
@@ -153,6 +165,7 @@ def joint_fit(
         coords=coords,
         dims=dims,
     )
+    idata.posterior.attrs["fresnel"] = fresnel
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)
     idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
     idata.observed_data["time"] = (

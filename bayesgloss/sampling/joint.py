@@ -58,6 +58,8 @@ __all__ = ["JointSamples", "sample_joint"]
 
 #: Kept chains hold every THIN-th sweep.
 THIN = 4
+#: Names of the draws' Fresnel columns (:data:`bayesgloss.fresnel.FRESNEL_COLUMNS`).
+FRESNEL_PARAMETERS = ("fresnel_strength", "log_normal_albedo")
 #: Collective moves per sweep (directions adapted during burn-in).
 COLLECTIVE = 4
 #: Burn-in sweeps, in rounds between which the collective directions are adapted.
@@ -70,10 +72,11 @@ class JointSamples:
 
     Attributes
     ----------
-    draws : ndarray (F, E, S, 4)
-        Facets' gamma, log n, log s, log sigma; F facets, E ensembles, S
-        draws each (each walker's trajectory thinned evenly, walkers one
-        after another).
+    draws : ndarray (F, E, S, 4) or (F, E, S, 6)
+        Facets' gamma, log n, log s, log sigma (and, where the one-material
+        model has a Fresnel term, its strength k and log A: ``parameters``);
+        F facets, E ensembles, S draws each (each walker's trajectory thinned
+        evenly, walkers one after another).
     frames : ndarray (E, S, T, L)
         Each frame's latents (:func:`bayesgloss.illumination.latent_names`)
         at the same draws.
@@ -102,7 +105,7 @@ class JointSamples:
     n_sweeps: int
     acceptance: dict
     seconds: float
-    parameters: tuple = ("gamma", "log_n", "log_s", "log_sigma")
+    parameters: tuple = ("gamma", "log_n", "log_s", "log_sigma")  # + FRESNEL_PARAMETERS
     material: np.ndarray | None = None
     data: object = None
     facets: object = None
@@ -592,7 +595,7 @@ def run_chain(
             if np.all(diag[3]):
                 break
     half = len(th_kept) // 2
-    th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, 3)
+    th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, C): C = 3, or 6 with Fresnel
     lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, L)
     if diag is None:
         diag = _diagnosed(th[:, :, pick], lam)
@@ -602,18 +605,20 @@ def run_chain(
     th, lam = th[keep], lam[keep]
     m = len(th)
     e, f, w = n_ensembles, data.shape[0], n_walkers
-    # (m, E, F, W, 3) -> (F, E, W m, 3), walkers one after another
-    draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, 3)
+    # (m, E, F, W, C) -> (F, E, W m, C), walkers one after another
+    draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, th.shape[-1])
     frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], data.n_latents)
     material = None
     if hyper is not None:  # (m, E, W, 2) -> (E, W m, 2)
         hk = np.stack(hyper_kept[half:])[keep]
         material = hk.transpose(1, 2, 0, 3).reshape(e, w * m, -1)
     # log sigma from its conditional at every draw
-    th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, 3)
+    th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, C)
     _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
     ls = chain._draw_log_sigma(q)  # (E, F, S), the chain's own noise model
-    draws = np.concatenate([draws3, ls.transpose(1, 0, 2)[..., None]], axis=-1)
+    # log sigma in column 3; the Fresnel k and log A (columns 4, 5) after it
+    draws = np.concatenate([draws3[..., :3], ls.transpose(1, 0, 2)[..., None], draws3[..., 4:]], -1)
+    parameters = JointSamples.parameters + (FRESNEL_PARAMETERS if draws.shape[-1] > 4 else ())
     sweeps = max(chain.sweeps, 1)
     return JointSamples(
         draws,
@@ -625,5 +630,6 @@ def run_chain(
         chain.sweeps,
         {k: v / sweeps for k, v in chain.accepted.items()},
         time.perf_counter() - t0,
+        parameters=parameters,
         material=material,
     )

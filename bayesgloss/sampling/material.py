@@ -59,6 +59,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
+from .. import fresnel as fr
 from .. import illumination as il
 from .joint import JointSamples, _curve_data_at, _JointChain, run_chain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
@@ -78,11 +79,19 @@ class _MaterialChain(_JointChain):
         e, f, w = self.e, self.f, self.w
         dx = data.log_n_grid[1] - data.log_n_grid[0]
         lo, hi = data.priors.log_n
-        th = np.empty((e, f, w, 3))
+        # the shared coordinates: gamma, log n (and the Fresnel k, log A)
+        self.shared = [0, 1] + (list(fr.FRESNEL_COLUMNS) if data.fresnel is not None else [])
+        th = np.zeros((e, f, w, 3 if data.fresnel is None else 6))
         g = _reflect(gamma0 + 0.02 * rng.standard_normal((e, 1, w)), 0.0, 1.0)
         n = _reflect(log_n0 + 0.3 * dx * rng.standard_normal((e, 1, w)), lo, hi)
         th[..., 0], th[..., 1] = g, n
         th[..., 2] = log_s0[None, :, None] + 0.02 * rng.standard_normal((e, f, w))
+        if data.fresnel is not None:  # k about 1/2, A about 0.3 (column 3 unused)
+            k_col, a_col = fr.FRESNEL_COLUMNS
+            a_lo, a_hi = np.log(fr.NORMAL_ALBEDO_RANGE)
+            th[..., k_col] = _reflect(0.5 + 0.1 * rng.standard_normal((e, 1, w)), 0.0, 1.0)
+            log_a = np.log(0.3) + 0.3 * rng.standard_normal((e, 1, w))
+            th[..., a_col] = _reflect(log_a, a_lo, a_hi)
         self.th = th
         # each facet's residual sd at the start (relative), fixed: the profile's weights
         th0 = np.zeros((1, f, 1, 3))
@@ -198,12 +207,19 @@ class _MaterialChain(_JointChain):
             idx, cidx = halves[k], halves[1 - k]
             lam, hyper = self.lam[:, idx], self.hyper[:, idx]
             old = self.th[:, :, idx]
-            q, factor = move.propose(old[:, 0, :, :2], self.th[:, 0, cidx, :2], rng, None)
+            shared = self.shared
+            q, factor = move.propose(
+                old[:, 0][..., shared], self.th[:, 0][:, cidx][..., shared], rng, None
+            )
             inside = (q[..., 0] >= 0) & (q[..., 0] <= 1) & (q[..., 1] >= p.log_n[0])
             inside &= q[..., 1] <= p.log_n[1]
             new = old.copy()
             new[..., 0] = np.clip(q[:, None, :, 0], 0.0, 1.0)
             new[..., 1] = np.clip(q[:, None, :, 1], *p.log_n)
+            if len(shared) > 2:  # the Fresnel k and log A
+                inside &= np.isfinite(fr.log_prior_fresnel(q[..., 2], q[..., 3]))
+                new[..., shared[2]] = q[:, None, :, 2]
+                new[..., shared[3]] = q[:, None, :, 3]
             parts_old = il.unit_parts(old, data, self.tables)
             parts_new = il.unit_parts(new, data, self.tables)
             lam_new = lam.copy()
@@ -325,23 +341,23 @@ class _MaterialChain(_JointChain):
     # -- collective moves: the whole state as a vector ---------------------------
 
     def state(self) -> np.ndarray:
-        """Every walker's state, (E, W, D): gamma, log n, each facet's log s,
-        m, log tau, then each frame's free latents."""
-        shared = self.th[:, 0, :, :2]
+        """Every walker's state, (E, W, D): gamma, log n (the Fresnel k and
+        log A), each facet's log s, m, log tau, then each frame's free latents."""
+        shared = self.th[:, 0][..., self.shared]
         log_s = self.th[..., 2].transpose(0, 2, 1)
         lam = self.lam[..., self.free].reshape(self.e, self.w, -1)
         return np.concatenate([shared, log_s, self.hyper, lam], axis=-1)
 
     def _split(self, x):
-        f = self.f
-        th = np.empty((self.e, f, self.w, 3))
-        th[..., 0] = x[:, None, :, 0]
-        th[..., 1] = x[:, None, :, 1]
-        th[..., 2] = x[..., 2 : 2 + f].transpose(0, 2, 1)
+        f, ns = self.f, len(self.shared)
+        th = np.zeros((self.e, f, self.w, self.th.shape[-1]))
+        for i, col in enumerate(self.shared):
+            th[..., col] = x[:, None, :, i]
+        th[..., 2] = x[..., ns : ns + f].transpose(0, 2, 1)
         nh = self.hyper.shape[-1]
-        hyper = x[..., 2 + f : 2 + f + nh]
+        hyper = x[..., ns + f : ns + f + nh]
         lam = self.lam.copy()
-        lam[..., self.free] = x[..., 2 + f + nh :].reshape(self.e, self.w, self.t, -1)
+        lam[..., self.free] = x[..., ns + f + nh :].reshape(self.e, self.w, self.t, -1)
         return th, hyper, lam
 
     def _full_density(self, th, hyper, lam) -> np.ndarray:
@@ -354,11 +370,11 @@ class _MaterialChain(_JointChain):
         return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
 
     def _blocks(self) -> list[slice]:
-        f, k = self.f, int(self.free.sum())
-        blocks = [slice(0, 2)] + [slice(2 + i, 3 + i) for i in range(f)]
+        f, k, ns = self.f, int(self.free.sum()), len(self.shared)
+        blocks = [slice(0, ns)] + [slice(ns + i, ns + 1 + i) for i in range(f)]
         nh = self.hyper.shape[-1]
-        blocks += [slice(2 + f, 4 + f), slice(4 + f, 2 + f + nh)]
-        o = 2 + f + nh
+        blocks += [slice(ns + f, ns + 2 + f), slice(ns + 2 + f, ns + f + nh)]
+        o = ns + f + nh
         blocks += [slice(o + k * i, o + k * (i + 1)) for i in range(self.t)]
         return blocks
 

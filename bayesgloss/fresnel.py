@@ -1,0 +1,156 @@
+"""Fresnel in the glossy basis: a smooth material's specular reflection rises toward grazing views.
+
+Radiance's ``plastic`` and ``metal`` of roughness 0 raise their specular
+reflectance by a Fresnel estimate F(c) = exp(-5.85 c) - c0 at the cosine c
+of the view angle (``normal.c``; :func:`bayesgloss.reflectance.fresnel_radiance`,
+:func:`bayesgloss.reflectance.radiance_material`), and so do real surfaces,
+smooth or rough. Let the material reflect, at normal incidence, the albedo
+A = g0 + d0, a glossy part g0 = A gamma and a diffuse part d0 = A (1 -
+gamma): gamma is the fraction of the reflected energy in the glossy lobe at
+normal incidence (the estimand; :func:`bayesgloss.reflectance.gloss_of_radiance_material`).
+Seen at cosine c_f (facet f), Radiance's material reflects
+
+    glossy  g_f = g0 + F_f (1 - g0),      diffuse  d_f = d0 (1 - F_f),
+
+and the diffuse part lit by the sun at cosine c_i is further multiplied by
+1 - F(c_i) (``dirnorm``). Divided by A (the facet's scale s_f carries the
+material's albedo), the unit part of a source p of
+:mod:`bayesgloss.illumination`, (1 - gamma) D^p + gamma G^p, becomes
+
+    (1 - k F_f) [(1 - gamma) D^p + gamma G^p] + (k F_f / A) G^p
+        - (1 - k F_f) (1 - gamma) k D^sun_F          (the sun's part only)
+
+with D^sun_F = D^sun_direct F(c_i) the direct sun's diffuse basis weighted
+by the Fresnel estimate at its incidence (:func:`fresnel_terms`). The
+strength k in [0, 1] is 1 for Radiance's smooth materials and for real
+surfaces, 0 for Radiance's rough ones (which have no Fresnel term); it and
+the normal-incidence albedo A are unknowns of the one-material model
+(uniform k, log A uniform on :data:`NORMAL_ALBEDO_RANGE`), shared by every
+facet, so that the rise of the specular part across facets seen at
+different angles tells them. A bright material (A near 1) barely shows the
+raise; a dark one (A = 0.2: plastic of specularity 0.04 and colour 0.2) is
+dominated by it at views beyond about 70 degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import reflectance
+
+__all__ = [
+    "FRESNEL_MODELS",
+    "FRESNEL_COLUMNS",
+    "NORMAL_ALBEDO_RANGE",
+    "FresnelTerms",
+    "fresnel_terms",
+    "fresnel_parts",
+    "log_prior_fresnel",
+    "sample_prior_fresnel",
+]
+
+#: Fresnel models of the one-material fit: ``"none"`` (no Fresnel term, the
+#: model of earlier versions and of Radiance's rough materials) and
+#: ``"radiance"`` (Radiance's estimate with an unknown strength k in [0, 1]
+#: and normal-incidence albedo A; module docstring).
+FRESNEL_MODELS = ("none", "radiance")
+
+#: Columns of theta (after gamma, log n, log s, log sigma) holding the
+#: Fresnel strength k and log A, where the data carry Fresnel terms.
+FRESNEL_COLUMNS = (4, 5)
+
+#: Range of the normal-incidence albedo A under its log-uniform prior [-]:
+#: from a near-black material to a white one.
+NORMAL_ALBEDO_RANGE = (0.02, 1.0)
+
+
+@dataclass(frozen=True)
+class FresnelTerms:
+    """The geometry's Fresnel estimates.
+
+    Attributes
+    ----------
+    view : ndarray (F,)
+        F(c_f) at each facet's view cosine [-].
+    sun_direct : ndarray (F, T)
+        D^sun_F: the direct sun's diffuse basis times F(c_i) at its
+        incidence cosine [W sr^-1 m^-2].
+    """
+
+    view: np.ndarray
+    sun_direct: np.ndarray
+
+    def take(self, facets=slice(None), frames=slice(None)) -> FresnelTerms:
+        """The terms of a subset of facets and frames."""
+        return FresnelTerms(self.view[facets], self.sun_direct[facets][:, frames])
+
+
+def fresnel_terms(geometry, sun_direction, solar_irradiance) -> FresnelTerms:
+    """Radiance's Fresnel estimates of each facet's view and of the sun on it.
+
+    Parameters
+    ----------
+    geometry : bayesgloss.render.ViewGeometry
+        F facets.
+    sun_direction : array_like (T, 3)
+        Unit vectors toward the sun.
+    solar_irradiance : array_like (T,)
+        Normal irradiance of the solar disc, 0 where the sun is down [W m^-2].
+
+    Returns
+    -------
+    FresnelTerms
+        F(max(c_f, 0.001)) (``pdot``'s floor in ``normal.c``), and
+        c_i E_sun / pi F(c_i) (0 where c_i <= 0).
+    """
+    cos_view = np.maximum(geometry.cos_view, 0.001)
+    view = reflectance.fresnel_radiance(cos_view)
+    sun = np.asarray(sun_direction, dtype=float)
+    cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
+    direct = cos_i * np.asarray(solar_irradiance, dtype=float)[None, :] / np.pi
+    f_i = np.where(cos_i > 0, reflectance.fresnel_radiance(np.maximum(cos_i, 1e-9)), 0.0)
+    return FresnelTerms(view, direct * f_i)
+
+
+def fresnel_parts(base, glossy, strength, log_albedo, view, sun_direct=None, gamma=None):
+    """A source's unit part with the Fresnel raise (module docstring).
+
+    Parameters
+    ----------
+    base : ndarray (..., F, W, T)
+        (1 - gamma) D^p + gamma G^p without Fresnel.
+    glossy : ndarray (..., F, W, T)
+        G^p at the exponent.
+    strength, log_albedo : ndarray (..., 1 or F, W, 1)
+        k [-] and log A.
+    view : ndarray (F,)
+        F(c_f).
+    sun_direct : ndarray (F, T), optional
+        D^sun_F, for the sun's part (with ``gamma``).
+    gamma : ndarray (..., F, W, 1), optional
+
+    Returns
+    -------
+    ndarray (..., F, W, T)
+    """
+    c = strength * view[:, None, None]  # k F_f
+    out = (1.0 - c) * base + c * np.exp(-log_albedo) * glossy
+    if sun_direct is not None:
+        out = out - (1.0 - c) * (1.0 - gamma) * strength * sun_direct[:, None, :]
+    return out
+
+
+def log_prior_fresnel(strength, log_albedo) -> np.ndarray:
+    """Log prior of (k, log A): uniform k on [0, 1], log A uniform on
+    :data:`NORMAL_ALBEDO_RANGE`; -inf outside, 0 inside (a constant)."""
+    lo, hi = np.log(NORMAL_ALBEDO_RANGE)
+    inside = (strength >= 0) & (strength <= 1) & (log_albedo >= lo) & (log_albedo <= hi)
+    return np.where(inside, 0.0, -np.inf)
+
+
+def sample_prior_fresnel(size, rng: np.random.Generator) -> np.ndarray:
+    """Draws of (k, log A) from their prior, (size, 2)."""
+    lo, hi = np.log(NORMAL_ALBEDO_RANGE)
+    return np.stack([rng.uniform(0.0, 1.0, size), rng.uniform(lo, hi, size)], axis=-1)
