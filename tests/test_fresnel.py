@@ -1,0 +1,149 @@
+"""The Fresnel raise of the one-material model (bayesgloss.fresnel)."""
+
+import numpy as np
+import pytest
+
+from bayesgloss import fresnel as fr
+from bayesgloss import illumination as il
+from bayesgloss import reflectance
+from bayesgloss.sampling import sample_material
+
+
+@pytest.mark.parametrize("kind", ["plastic", "metal"])
+def test_fresnel_parts_are_radiance_materials(kind):
+    # the transform of a unit part, times the normal-incidence albedo A, must
+    # be what Radiance's normal.c reflects (reflectance.radiance_material, its
+    # Fresnel raise at the view angle and dirnorm's at the sun's incidence)
+    # for roughness-0 materials over a grid of colours, specularities and
+    # angles; D and G arbitrary positive bases. A transform that forgot the
+    # sun's diffuse factor, or divided by the wrong albedo, misses by > 1e-3
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        rho, spec = rng.uniform(0.02, 0.9), rng.uniform(0.02, 0.98)
+        c_view, c_sun = rng.uniform(0.02, 1.0), rng.uniform(0.02, 1.0)
+        d_sky, d_sun, g_sky, g_sun = rng.uniform(0.1, 2.0, 4)
+        m = reflectance.radiance_material(kind, rho, spec, 0.0, c_view, c_sun)
+        gamma = float(reflectance.gloss_of_radiance_material(kind, spec, rho))
+        albedo = spec + (1 - spec) * rho if kind == "plastic" else rho
+        f_view = reflectance.fresnel_radiance(c_view)
+        f_sun = reflectance.fresnel_radiance(c_sun)
+        one = np.ones((1, 1, 1))
+        k, log_a = one, np.log(albedo) * one
+        sky = fr.fresnel_parts(
+            (1 - gamma) * d_sky + gamma * g_sky * one, g_sky * one, k, log_a, np.array([f_view])
+        )
+        sun = fr.fresnel_parts(
+            (1 - gamma) * d_sun + gamma * g_sun * one,
+            g_sun * one,
+            k,
+            log_a,
+            np.array([f_view]),
+            np.array([[d_sun * f_sun]]),
+            gamma * one,
+        )
+        want_sky = float(m.diffuse_ambient) * d_sky + float(m.specular) * g_sky
+        want_sun = float(m.diffuse_direct) * d_sun + float(m.specular) * g_sun
+        np.testing.assert_allclose(albedo * sky.ravel(), want_sky, rtol=1e-9)
+        np.testing.assert_allclose(albedo * sun.ravel(), want_sun, rtol=1e-9)
+
+
+def test_fresnel_terms_of_a_geometry(paper_three_skies):
+    # F(c_f) of each facet's view cosine, and the direct sun's diffuse basis
+    # times F at its incidence: the direct part of render.diffuse_components
+    # (its E_sun cos_i / pi) weighted by normal.c's estimate
+    from bayesgloss import render, scene
+
+    seq = scene.paper_sequence(view="SW")
+    g = scene.seen_geometry(seq)
+    terms = fr.fresnel_terms(
+        g,
+        seq.sky.sun_direction,
+        np.where(
+            seq.sky.sun_direction[:, 2] > 0, seq.sky.solar_radiance * seq.sky.sun_solid_angle, 0.0
+        ),
+    )
+    np.testing.assert_allclose(
+        terms.view, reflectance.fresnel_radiance(np.maximum(g.cos_view, 0.001))
+    )
+    _, direct = render.diffuse_components(g, seq.sky)
+    cos_i = np.maximum(g.normal @ seq.sky.sun_direction.T, 0.0)
+    f_i = np.where(cos_i > 0, reflectance.fresnel_radiance(np.maximum(cos_i, 1e-9)), 0.0)
+    np.testing.assert_allclose(terms.sun_direct, direct * f_i, rtol=1e-12, atol=1e-12)
+    # the bases carry the same terms (split by facets and frames as the bases are)
+    bases, up = paper_three_skies
+    np.testing.assert_allclose(bases.fresnel.view, terms.view)
+    np.testing.assert_allclose(
+        bases.take(slice(0, 5), up).fresnel.sun_direct, terms.sun_direct[:5][:, up]
+    )
+
+
+def _simulated(bases, gamma, albedo, strength, rng):
+    f, t = bases.diffuse.shape[1:]
+    lam = np.zeros((1, 1, t, 5))
+    lam[..., 3:] = -8.0  # gensky's clear sky
+    th = np.zeros((1, f, 1, 6))
+    th[..., 0], th[..., 1], th[..., 3] = gamma, np.log(2000.0), np.log(0.01)
+    th[0, :, 0, 2] = np.log(0.5) + 0.02 * rng.standard_normal(f)
+    th[..., 4], th[..., 5] = strength, np.log(albedo)
+    valid = np.ones((f, t), bool)
+    ref = il.joint_data(np.ones((f, t)), valid, bases, exposure=np.ones(t), fresnel="radiance")
+    return il.simulate(th, lam, ref, rng)[0, :, 0], valid
+
+
+def test_dark_smooth_plastic_needs_the_fresnel_raise(paper_three_skies):
+    # Radiance plastic of specularity 0.04 and colour 0.2 (gamma 0.171 at
+    # normal incidence, A 0.232), Fresnel-raised as normal.c does it, seen
+    # on every other facet of the paper's hemisphere (views up to F = 0.49):
+    # without a Fresnel term the best one-material fit (the sampler's start,
+    # a grid of gamma and n at the data's frames) takes the raise for gloss
+    # (0.45 here, 0.75 on all facets; the holdout's vs02 read 0.60 for 0.17); the Fresnel model
+    # must hold 0.171 in its 90 % interval within 0.02, its strength near 1
+    # and its albedo within 20 %. 1 % noise; a short run (the medians move
+    # by less than 0.005 between 600 and 1600 sweeps)
+    from bayesgloss.sampling.joint import starting_frames
+    from bayesgloss.sampling.material import starting_material
+
+    full, up = paper_three_skies
+    bases = full.take(slice(0, None, 2), up)
+    rng = np.random.default_rng(1)
+    y, valid = _simulated(bases, 0.171, 0.232, 1.0, rng)
+    t = y.shape[1]
+    plain = il.joint_data(y, valid, bases, exposure=np.ones(t))
+    gamma_plain, _, _ = starting_material(plain, starting_frames(plain))
+    assert gamma_plain > 0.35, gamma_plain
+    data = il.joint_data(y, valid, bases, exposure=np.ones(t), fresnel="radiance")
+    res = sample_material(data, seed=4, min_sweeps=400, max_sweeps=400)
+    assert res.parameters[4:] == ("fresnel_strength", "log_normal_albedo")
+    g = res.draws[0, ..., 0].ravel()
+    q05, q50, q95 = np.quantile(g, [0.05, 0.5, 0.95])
+    assert q05 <= 0.171 <= q95 and abs(q50 - 0.171) < 0.02, (q05, q50, q95)
+    assert np.median(res.draws[0, ..., 4]) > 0.9
+    assert abs(np.exp(np.median(res.draws[0, ..., 5])) / 0.232 - 1) < 0.2
+
+
+def test_without_data_the_fresnel_unknowns_keep_their_prior(paper_three_skies):
+    # no usable observation: k uniform on [0, 1] (mean 1/2) and log A uniform
+    # on its range; a move that is not reversible in the new coordinates, or
+    # a prior left out, pulls these off. Tolerances: autocorrelated draws of
+    # a few hundred effective samples
+    full, up = paper_three_skies
+    bases = full.take(slice(0, 5), np.flatnonzero(up)[3:9])
+    f, t = bases.diffuse.shape[1:]
+    data = il.joint_data(
+        np.ones((f, t)), np.zeros((f, t), bool), bases, exposure=np.ones(t), fresnel="radiance"
+    )
+    res = sample_material(data, seed=3, min_sweeps=800, max_sweeps=800)
+    k = res.draws[0, ..., 4].ravel()
+    lo, hi = np.log(fr.NORMAL_ALBEDO_RANGE)
+    u = (res.draws[0, ..., 5].ravel() - lo) / (hi - lo)
+    assert abs(k.mean() - 0.5) < 0.08 and abs(np.mean(k < 0.2) - 0.2) < 0.08
+    assert abs(u.mean() - 0.5) < 0.08 and abs(np.mean(u < 0.2) - 0.2) < 0.08
+    assert abs(res.draws[0, ..., 0].mean() - 0.5) < 0.08
+
+
+def test_unknown_fresnel_model_is_refused(paper_three_skies):
+    full, up = paper_three_skies
+    bases = full.take(slice(0, 3), up)
+    f, t = bases.diffuse.shape[1:]
+    with pytest.raises(ValueError, match="unknown Fresnel model 'schlick'"):
+        il.joint_data(np.ones((f, t)), np.ones((f, t), bool), bases, fresnel="schlick")
