@@ -1263,6 +1263,8 @@ def write_bundle(
     frame_format: str = "hdr",
     extra: Mapping | None = None,
     overwrite: bool = False,
+    exposure: Sequence[float] | None = None,
+    object_mesh: str | os.PathLike | None = None,
 ) -> Path:
     """Write a sequence bundle folder (``bayesgloss-sequence/1``).
 
@@ -1307,6 +1309,14 @@ def write_bundle(
         More top-level manifest fields (readers ignore what they do not know). -
     overwrite : bool, default False
         Replace an existing folder at ``path``. -
+    exposure : sequence of float, optional
+        ``frames[].exposure``: each frame's relative exposure, > 0, one per
+        frame (a linear factor between radiance and pixel value, any common
+        scale) [-].
+    object_mesh : str or path-like, optional
+        A triangle mesh file (OBJ or PLY, world frame, metres) copied into the
+        bundle as ``object_mesh.obj`` or ``object_mesh.ply`` and named by the
+        manifest's ``object_mesh``. -
 
     Returns
     -------
@@ -1369,6 +1379,17 @@ def write_bundle(
         {"file": name, "time": _iso_time(t, i)}
         for i, (name, t) in enumerate(zip(names, times, strict=True))
     ]
+    if exposure is not None:
+        exposure = [float(e) for e in exposure]
+        if len(exposure) != len(frames):
+            raise ValueError(f"got {len(frames)} frames but {len(exposure)} exposures")
+        for frame, value in zip(manifest["frames"], exposure, strict=True):
+            frame["exposure"] = value
+    mesh_name = None
+    if object_mesh is not None:
+        mesh_name = f"object_mesh{Path(object_mesh).suffix.lower()}"
+        if not Path(object_mesh).is_file():
+            raise ValueError(f"object_mesh: no mesh file '{object_mesh}'")
     manifest["facets"] = [
         {
             "id": int(fid),
@@ -1377,6 +1398,8 @@ def write_bundle(
         }
         for fid, n, c in zip(ids, facets.normal, facets.center, strict=True)
     ]
+    if mesh_name is not None:
+        manifest["object_mesh"] = mesh_name
     if truth is not None:
         manifest["truth"] = dict(truth)
     for key, value in (extra or {}).items():
@@ -1401,6 +1424,8 @@ def write_bundle(
         for frame, name in zip(frames, names, strict=True):
             _frame_file(frame, tmp / name, frame_format)
         write_png(tmp / LABELS, label_arr.astype(np.uint8 if ids.max() < 256 else np.uint16))
+        if mesh_name is not None:
+            shutil.copyfile(object_mesh, tmp / mesh_name)
         text = json.dumps(manifest, indent=2, allow_nan=False)
         (tmp / MANIFEST).write_text(text + "\n", encoding="utf-8")
         if root.exists():  # overwrite: move the old bundle aside, then swap

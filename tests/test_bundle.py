@@ -1552,6 +1552,28 @@ def test_object_mesh_is_checked_and_said_unused(tmp_path):
         bd.read_bundle(path)
 
 
+def test_writer_writes_exposure_and_object_mesh(tmp_path):
+    # frames[].exposure and object_mesh written by write_bundle read back as given;
+    # without them the manifest has neither (bundles as before)
+    mesh = tmp_path / "src.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    exposure = [0.004 * (k + 1) for k in range(len(DAY_TIMES))]
+    path, _ = _write(tmp_path, exposure=exposure, object_mesh=mesh)
+    with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.obj' is not used yet"):
+        b = bd.read_bundle(path)
+    np.testing.assert_array_equal(b.exposure, exposure)
+    assert b.manifest["object_mesh"] == "object_mesh.obj"
+    assert (Path(path) / "object_mesh.obj").read_bytes() == mesh.read_bytes()
+    plain, _ = _write(tmp_path, name="plain")
+    manifest = json.loads((Path(plain) / bd.MANIFEST).read_text())
+    assert "object_mesh" not in manifest and all("exposure" not in f for f in manifest["frames"])
+    with pytest.raises(ValueError, match="exposures"):
+        _write(tmp_path, name="short", exposure=exposure[:-1])
+    with pytest.raises(bd.BundleError, match="object_mesh.*OBJ or PLY"):
+        _write(tmp_path, name="stl", object_mesh=mesh.rename(tmp_path / "src.stl"))
+    assert not (tmp_path / "short").exists() and not (tmp_path / "stl").exists()
+
+
 # the reader under 1000 mutated bundles: run in a child process so that its
 # peak memory is its own (the test's process has held far more by then)
 
