@@ -280,6 +280,12 @@ def _print_estimate(name, summary) -> None:
         fam = summary["sky_families"]["families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
         print(f"sky families (stacking weight): {weights}")
+    if "fresnel_strength" in o:  # the Fresnel raise's unknowns (estimate --fresnel radiance)
+        k, a = o["fresnel_strength"], o["normal_albedo"]
+        print(
+            f"Fresnel strength {k['median']:.2f} [{k['q05']:.2f}, {k['q95']:.2f}], "
+            f"normal-incidence albedo {a['median']:.2f} [{a['q05']:.2f}, {a['q95']:.2f}]"
+        )
     print(f"{'facet':>6} {'gamma':>6} {'90 % interval':>13}  flags")
     for f in summary["facets"]:
         if f["gamma"] is None:

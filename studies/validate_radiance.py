@@ -49,12 +49,13 @@ HERE = Path(__file__).parent
 #: after its first run (``configs/validation_holdout.json``).
 SETS = {"validation_set": "validation_radiance", "validation_holdout": "validation_holdout"}
 RESULTS = HERE / "results"
-METHODS = ("baseline", "fixed", "per-frame", "families")
+METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel")
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
     "fixed": {"per_frame": False},
     "per-frame": {"per_frame": True},
     "families": {"per_frame": True, "illumination": "families"},
+    "fresnel": {"per_frame": True, "illumination": "families", "fresnel": "radiance"},
 }
 
 
