@@ -16,6 +16,11 @@ studies/README.md). Too long for the test suite.
 
     python studies/sbc_material.py [--n 100] [--seed 2027] [--jobs 2]
         [--max-sweeps 4000] [--out studies/results/sbc_material.json]
+        [--fresnel radiance --out studies/results/sbc_material_fresnel.json]
+
+With ``--fresnel radiance`` the model has the Fresnel raise
+(:mod:`bayesgloss.fresnel`), its strength k and normal-incidence albedo A
+drawn from their prior with the rest, and k's rank is tested too.
 """
 
 from __future__ import annotations
@@ -49,11 +54,11 @@ def paper_three_skies():
     return il.illumination_bases(g, seq.sky, others=others), up
 
 
-def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8):
+def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8, fresnel: str = "none"):
     """The reference data of the SBC objects: ``facets`` facets spread over the
     paper scene's, ``frames`` sun-up frames spread over the day, a fixed prior
     centre of log s and a fixed noise floor (so the likelihood fitted is the
-    one simulated)."""
+    one simulated); ``fresnel`` the Fresnel model (:mod:`bayesgloss.fresnel`)."""
     full, up = paper_three_skies
     sun_up = np.flatnonzero(up)[1:-1]
     pick_t = sun_up[np.linspace(0, len(sun_up) - 1, frames).round().astype(int)]
@@ -66,6 +71,7 @@ def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8):
         bases,
         exposure=np.ones(t),
         priors=lk.Priors(log_s_center=0.0),
+        fresnel=fresnel,
     )
     return dataclasses.replace(ref, floor=0.01 * bases.total().diffuse.max(axis=1))
 
@@ -85,8 +91,10 @@ def sbc_object(ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int 
     )
     gamma = res.draws[0, ..., 0]  # (E, W m), each walker's draws one after another
     draws = (gamma.ravel(), res.material[..., 1].ravel(), res.frames[..., t // 2, 1].ravel())
-    pick = np.linspace(0, len(draws[0]) - 1, n_draws).round().astype(int)
     truth = (th[0, 0, 0], hyper[0, 1], lam[0, t // 2, 1])
+    if ref.fresnel is not None:  # the Fresnel strength k too
+        draws, truth = (*draws, res.draws[0, ..., 4].ravel()), (*truth, th[0, 0, 4])
+    pick = np.linspace(0, len(draws[0]) - 1, n_draws).round().astype(int)
     walkers = gamma.reshape(e * w, -1)[None]
     rhat_walkers = float(diagnostics.diagnose(walkers.astype(float))[0][0])
     return {
@@ -109,9 +117,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--max-sweeps", type=int, default=4000)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="studies/results/sbc_material.json")
+    ap.add_argument("--fresnel", default="none", choices=("none", "radiance"))
     args = ap.parse_args(argv)
     t0 = time.time()
-    ref = sbc_design(paper_three_skies())
+    ref = sbc_design(paper_three_skies(), fresnel=args.fresnel)
     run = functools.partial(sbc_object, ref, args.seed, max_sweeps=args.max_sweeps)
     rows = []
     with process_pool(args.jobs) as pool:
@@ -121,11 +130,13 @@ def main(argv=None) -> dict:
     ranks = np.array([r["ranks"] for r in rows])
     out = {"n": args.n, "seed": args.seed, "draws": 99, "minutes": (time.time() - t0) / 60}
     out["design"] = {"facets": ref.shape[0], "frames": ref.shape[1], "max_sweeps": args.max_sweeps}
+    out["design"]["fresnel"] = args.fresnel
     out["converged"] = float(np.mean([r["converged"] for r in rows]))
     out["rhat_walkers_quantiles"] = np.quantile(
         [r["rhat_walkers"] for r in rows], [0.5, 0.9, 1.0]
     ).tolist()
-    for k, name in enumerate(("gamma", "log_tau", "log_sun")):
+    names = ("gamma", "log_tau", "log_sun", "fresnel_strength")[: ranks.shape[1]]
+    for k, name in enumerate(names):
         counts = np.bincount(ranks[:, k] * 10 // 100, minlength=10)
         out[name] = {"counts": counts.tolist(), "p": float(stats.chisquare(counts).pvalue)}
         # the 90 % central interval of 99 draws (5 below it, 5 above) holds the

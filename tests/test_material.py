@@ -85,7 +85,8 @@ def test_one_material_reads_gloss_albedo_spread_and_clouded_frames(paper_three_s
 
 
 @pytest.mark.slow
-def test_one_material_sbc(paper_three_skies):
+@pytest.mark.parametrize("fresnel", ["none", "radiance"])
+def test_one_material_sbc(paper_three_skies, fresnel):
     # Simulation-based calibration of the default object model (Talts et al.
     # 2018) with the study's code (studies/sbc_material.py) on a smaller
     # design: 60 objects of 6 facets over 6 frames drawn from the prior,
@@ -95,7 +96,9 @@ def test_one_material_sbc(paper_three_skies):
     # 1e-3 (a correct sampler fails 1 run in 1000 per quantity). gamma's 90 %
     # interval (ranks 5-94) must hold the truth in 46-59 of 60: the 99.9 %
     # binomial range at 0.9; an interval 30 % too narrow holds it in about
-    # 45 of 60 (stop 24's unmixed walkers held it in 79 of 100).
+    # 45 of 60 (stop 24's unmixed walkers held it in 79 of 100). With the
+    # Fresnel raise (bayesgloss.fresnel) its strength k is drawn from its
+    # prior with the rest, and its ranks are tested too.
     import importlib.util
     from pathlib import Path
 
@@ -106,7 +109,7 @@ def test_one_material_sbc(paper_three_skies):
     spec = importlib.util.spec_from_file_location("sbc_material_study", path)
     study = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(study)
-    ref = study.sbc_design(paper_three_skies, facets=6, frames=6)
+    ref = study.sbc_design(paper_three_skies, facets=6, frames=6, fresnel=fresnel)
     with process_pool(2) as pool:  # the study's objects, importable in every worker
         futures = [
             pool.submit(
@@ -116,7 +119,9 @@ def test_one_material_sbc(paper_three_skies):
         ]
         rows = [f.result() for f in futures]
     ranks = np.array([r["ranks"] for r in rows])
-    for k, name in enumerate(("gamma", "log_tau", "log_sun")):
+    names = ("gamma", "log_tau", "log_sun", "fresnel_strength")
+    assert ranks.shape[1] == (4 if fresnel == "radiance" else 3)
+    for k, name in enumerate(names[: ranks.shape[1]]):
         counts = np.bincount(ranks[:, k] * 10 // 100, minlength=10)
         assert stats.chisquare(counts).pvalue > 1e-3, (name, counts)
     held = int(np.sum((ranks[:, 0] >= 5) & (ranks[:, 0] <= 94)))
