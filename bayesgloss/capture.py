@@ -300,11 +300,11 @@ def read_camera(path: str | os.PathLike) -> Camera:
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise fail("-", "no such file") from None
+        raise fail("file", "no such file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise fail("-", f"not a readable JSON file: {err}") from None
+        raise fail("file", f"not a readable JSON file: {err}") from None
     if not isinstance(data, dict):
-        raise fail("-", f"must be a JSON object, got {type(data).__name__}")
+        raise fail("file", f"must be a JSON object, got {type(data).__name__}")
 
     def number(key: str, positive: bool = False) -> float:
         if key not in data:
@@ -450,16 +450,16 @@ def load_mesh(path: str | os.PathLike, transform: np.ndarray | None = None):
 
     path = Path(path)
     if path.suffix.lower() not in MESH_SUFFIXES:
-        raise fail("-", f"must be an OBJ, PLY or STL file ({', '.join(MESH_SUFFIXES)})")
+        raise fail("format", f"must be an OBJ, PLY or STL file ({', '.join(MESH_SUFFIXES)})")
     if not path.is_file():
-        raise fail("-", "no such file")
+        raise fail("file", "no such file")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # trimesh's notes on what it skipped
             scene = trimesh.load_scene(path)
             parts = [g for g in scene.dump() if isinstance(g, trimesh.Trimesh)]
     except Exception as err:  # trimesh raises many kinds on a damaged file
-        raise fail("-", f"cannot load the mesh: {type(err).__name__}: {err}") from None
+        raise fail("file", f"cannot load the mesh: {type(err).__name__}: {err}") from None
     parts = [g for g in parts if len(g.faces)]
     if not parts:
         raise fail("faces", "the file holds no triangles")
@@ -595,7 +595,7 @@ def mesh_facets(
     return region, normal, center, area
 
 
-#: Rays cast at once (memory of the ray-triangle tests).
+#: Rays cast at once with Embree (``embreex``; trimesh picks it where installed).
 _RAY_CHUNK = 250_000
 
 
@@ -604,8 +604,13 @@ def _first_hits(mesh, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
     directions = directions.reshape(-1, 3)
     hit = np.full(len(directions), -1, dtype=np.int64)
     ok = np.flatnonzero(np.all(np.isfinite(directions), axis=-1))
-    for start in range(0, len(ok), _RAY_CHUNK):
-        index = ok[start : start + _RAY_CHUNK]
+    chunk = _RAY_CHUNK
+    if not type(mesh.ray).__module__.endswith("ray_pyembree"):
+        # trimesh's own ray-triangle tests (no embreex) hold every triangle whose box
+        # meets a ray's: bound the pairs held at once (a 82k-face mesh took 24 GB)
+        chunk = max(64, 20_000_000 // max(len(mesh.faces), 1))
+    for start in range(0, len(ok), chunk):
+        index = ok[start : start + chunk]
         origins = np.broadcast_to(origin, (len(index), 3))
         hit[index] = mesh.ray.intersects_first(origins, directions[index])
     return hit
@@ -631,11 +636,19 @@ def label_image(mesh, face_region: np.ndarray, camera: Camera) -> np.ndarray:
     ndarray (height, width) of int
         Region per pixel, -1 for background, edge and mixed pixels [-].
     """
+    return _cast(mesh, face_region, camera)[0]
+
+
+def _cast(mesh, face_region, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`label_image`, and whether each pixel's centre ray met its face's front."""
     w, h = camera.width, camera.height
     lookup = np.append(np.asarray(face_region, dtype=np.int64), -1)  # -1: no hit
     u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    centre = lookup[_first_hits(mesh, camera.position, camera_rays(camera, u, v))]
-    centre = centre.reshape(h, w)
+    rays = camera_rays(camera, u, v)
+    face = _first_hits(mesh, camera.position, rays)
+    normal = np.append(np.asarray(mesh.face_normals, dtype=float), np.zeros((1, 3)), axis=0)
+    front = (np.einsum("pk,pk->p", normal[face], rays.reshape(-1, 3)) < 0).reshape(h, w)
+    centre = lookup[face].reshape(h, w)
     u, v = np.meshgrid(np.arange(w + 1) - 0.5, np.arange(h + 1) - 0.5)
     corner = lookup[_first_hits(mesh, camera.position, camera_rays(camera, u, v))]
     corner = corner.reshape(h + 1, w + 1)
@@ -645,7 +658,7 @@ def label_image(mesh, face_region: np.ndarray, camera: Camera) -> np.ndarray:
         & (corner[1:, :-1] == centre)
         & (corner[1:, 1:] == centre)
     )
-    return np.where(whole, centre, -1)
+    return np.where(whole, centre, -1), front
 
 
 # ---------------------------------------------------------------------------
@@ -662,7 +675,7 @@ def _exif(path: Path) -> tuple[dict, dict, dict]:
             exif = img.getexif()
             return dict(exif), dict(exif.get_ifd(_EXIF_IFD)), dict(exif.get_ifd(_GPS_IFD))
     except Exception as err:  # Pillow raises many kinds on a damaged file
-        raise CaptureError("photo", path, "-", f"cannot read the photo: {err}") from None
+        raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
 
 
 def _utc_offset(text: str, path, field: str) -> _dt.timezone:
@@ -801,10 +814,10 @@ def find_photos(items: Sequence[str | os.PathLike]) -> list[Path]:
         elif path.is_file():
             found.append(path)
         else:
-            raise CaptureError("photos", path, "-", "no such file or folder")
+            raise CaptureError("photos", path, "file", "no such file or folder")
     if not found:
         raise CaptureError(
-            "photos", ", ".join(map(str, items)), "-", "holds no JPEG, PNG or TIFF photo"
+            "photos", ", ".join(map(str, items)), "file", "holds no JPEG, PNG or TIFF photo"
         )
     return found
 
@@ -818,24 +831,24 @@ def _photo_pixels(path: Path, camera: Camera, camera_file) -> tuple[Any, str]:
     try:
         kind = image_kind(path)
     except OSError as err:
-        raise CaptureError("photo", path, "-", f"cannot read the photo: {err}") from None
+        raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
     except ValueError:
         kind = "jpeg"
     if kind in ("png", "tiff"):
         try:
             info = image_info(path)
         except Exception as err:
-            raise CaptureError("photo", path, "-", f"cannot read the photo: {err}") from None
+            raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
         size, frame = (info.width, info.height), path
     elif kind == "jpeg":
         try:
             with Image.open(path) as img:
                 frame = np.asarray(img.convert("RGB"))
         except Exception as err:
-            raise CaptureError("photo", path, "-", f"cannot read the photo: {err}") from None
+            raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
         size = (frame.shape[1], frame.shape[0])
     else:
-        raise CaptureError("photo", path, "-", f"a {kind} file; photos are JPEG, PNG or TIFF")
+        raise CaptureError("photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF")
     if size != (camera.width, camera.height):
         raise CaptureError(
             "photo",
@@ -942,6 +955,7 @@ def make_bundle(
     times = [photo_time(p, utc_offset) for p in files]
     order = np.argsort(pd.DatetimeIndex([t.tz_convert("UTC") for t in times]), kind="stable")
     files, times = [files[i] for i in order], [times[i] for i in order]
+    frames, kinds = zip(*(_photo_pixels(p, cam, camera) for p in files), strict=True)
 
     exposures = [photo_exposure(p) for p in files]
     if all(e is not None for e in exposures):
@@ -959,9 +973,15 @@ def make_bundle(
     site = _site(files, latitude, longitude, elevation)
 
     region, normal, center, _ = mesh_facets(world, group, facet_angle)
-    seen = label_image(world, region, cam)
+    seen, front = _cast(world, region, cam)
     counts = np.bincount(seen[seen >= 0], minlength=len(normal))
-    keep = np.flatnonzero(counts >= min_facet_pixels)
+    # a region whose seen faces the rays meet from behind is wound inside out: turn it
+    backs = np.bincount(seen[(seen >= 0) & ~front], minlength=len(normal))
+    inverted = (counts > 0) & (backs > counts / 2)
+    normal = np.where(inverted[:, None], -normal, normal)
+    # a curved region at the silhouette may be seen while its mean normal faces away
+    facing = np.einsum("fk,fk->f", cam.position - center, normal) > 0
+    keep = np.flatnonzero((counts >= min_facet_pixels) & facing)
     if not len(keep):
         raise CaptureError(
             "camera",
@@ -973,22 +993,20 @@ def make_bundle(
         )
     if len(keep) > 65535:
         raise ValueError(f"{len(keep)} facets seen, more than a label image holds (65535)")
+    if np.any(inverted[keep]):
+        warnings.warn(
+            f"mesh '{mesh}': the camera sees {int(inverted[keep].sum())} of {len(keep)} facets "
+            "from behind by the mesh's winding (faces wound inside out); their normals are "
+            "turned toward it",
+            CaptureWarning,
+            stacklevel=2,
+        )
     ids = np.zeros(len(normal) + 1, dtype=np.int64)  # region -> id; index -1 is background
     ids[keep] = np.arange(1, len(keep) + 1)
     labels = ids[seen]
     facet_normal, facet_center = normal[keep], center[keep]
-    behind = np.einsum("fk,fk->f", cam.position - facet_center, facet_normal) < 0
-    if np.any(behind):
-        warnings.warn(
-            f"mesh '{mesh}': {int(behind.sum())} of {len(keep)} seen facets face away from "
-            "the camera by the mesh's winding; their normals are turned toward it",
-            CaptureWarning,
-            stacklevel=2,
-        )
-        facet_normal = np.where(behind[:, None], -facet_normal, facet_normal)
     facets = Facets(np.arange(1, len(keep) + 1), facet_normal, facet_center)
 
-    frames, kinds = zip(*(_photo_pixels(p, cam, camera) for p in files), strict=True)
     encoding = "srgb" if all(k == "jpeg" for k in kinds) else pixel_encoding
     if "jpeg" in kinds and encoding != "srgb":
         raise CaptureError(

@@ -629,7 +629,8 @@ def _parser() -> argparse.ArgumentParser:
     mk.add_argument(
         "--utc-offset",
         metavar="+HH:MM",
-        help="the camera clock's UTC offset, for photos whose EXIF has none",
+        help="the camera clock's UTC offset, for photos whose EXIF has none (a negative one "
+        "as --utc-offset=-05:00)",
     )
     mk.add_argument("--latitude", type=float, help="site, deg north (default: EXIF GPS)")
     mk.add_argument("--longitude", type=float, help="site, deg east (default: EXIF GPS)")
