@@ -6,42 +6,15 @@ bundle from what a user of a tripod camera has:
 - a triangle **mesh** of the object (OBJ, PLY or STL, read by ``trimesh``) in
   the world frame (x east, y north, z up, metres), or with a 4 x 4 transform
   into it (:func:`load_mesh`);
-- a **camera** file (JSON, :func:`read_camera`): OpenCV's pinhole model with
-  its distortion, and the pose;
+- a **camera** file (JSON, :func:`bayesgloss.camera_model.read_camera`, whose
+  docstring gives the fields): OpenCV's pinhole model with its distortion,
+  and the pose;
 - the **photos** (JPEG, PNG, TIFF) with their times, exposures and, perhaps,
-  the site in EXIF (:func:`photo_time`, :func:`photo_exposure`,
-  :func:`photo_site`).
-
-The camera file
----------------
-One JSON object, OpenCV's conventions throughout::
-
-    {"width": 4000, "height": 3000,
-     "fx": 3200.0, "fy": 3200.0, "cx": 1999.5, "cy": 1499.5,
-     "distortion": [k1, k2, p1, p2, k3],
-     "rotation": [[r11, r12, r13], [r21, r22, r23], [r31, r32, r33]],
-     "position": [x, y, z]}
-
-``width``, ``height``: the photos' size in pixels, as stored (EXIF
-orientation is not applied). ``fx``, ``fy``, ``cx``, ``cy``: focal lengths and
-principal point in pixels, in OpenCV's pixel coordinates: u to the right, v
-down, the *centre* of the top-left pixel at (0, 0) (so the image's centre is
-((width - 1) / 2, (height - 1) / 2)). ``distortion``: OpenCV's
-``distCoeffs`` (k1, k2, p1, p2[, k3]), optional, default none; a point of
-normalised coordinates (x, y) = (X_c / Z_c, Y_c / Z_c) is imaged at
-u = fx x'' + cx, v = fy y'' + cy with (:func:`distort`)
-x'' = x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2),
-y'' = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y.
-``rotation``: OpenCV's R, world to camera, as a 3 x 3 matrix or a
-Rodrigues vector (``rvec``); its rows are the camera's axes in the world
-frame: x to the right of the image, y down it, z along the optical axis.
-``position``: the camera's centre C in the world frame [m]; or, instead,
-``translation``: OpenCV's ``tvec`` t, with C = -R^T t. A world point X is then
-at X_c = R (X - C) in the camera.
+  the site in EXIF (:mod:`bayesgloss.exif`).
 
 The label image is made in the *distorted* camera: frames are written as
 stored (no resampling), and each pixel's rays are the undistorted
-directions of its points (:func:`undistort`).
+directions of its points (:func:`bayesgloss.camera_model.undistort`).
 
 Facets and labels
 -----------------
@@ -49,20 +22,22 @@ Facets are the mesh's near-planar regions (:func:`planar_regions`): faces
 joined across shared edges while their normals lie within ``facet_angle``
 of the region's seed face, never across the mesh's own groups (an OBJ's
 ``usemtl`` materials, a scene's separate geometries). Each facet's normal
-and centre are the area-weighted means of its faces' normals and centroids
-(the normal turned toward the camera where the mesh's winding made it face
-away, with a warning). The label image (:func:`label_image`) casts a ray
-through each pixel's centre and its four corners (``trimesh``'s ray
-casting); a pixel is labelled with a facet only when all five rays first
-hit that facet: wholly inside it and not occluded, edge and mixed pixels
-left out, as the labels of :mod:`bayesgloss.sequences` are. Facets with
-fewer than ``min_facet_pixels`` labelled pixels are dropped.
+and centre are the area-weighted means of its faces' normals and centroids.
+The label image (:func:`label_image`) casts a ray through each pixel's
+centre and its four corners (``trimesh``'s ray casting, with Embree through
+``embreex``); a pixel is labelled with a facet only when all five rays
+first hit that facet: wholly inside it and not occluded, edge and mixed
+pixels left out, as the labels of :mod:`bayesgloss.sequences` are. Dropped:
+facets with fewer than ``min_facet_pixels`` labelled pixels, and curved
+regions at the silhouette whose mean normal faces away from the camera.
+Where the rays meet most of a facet's seen faces from behind (a mesh
+wound inside out), its normal is turned, with a :class:`CaptureWarning`.
 
 Times, exposures, site
 ----------------------
-A frame's time is EXIF ``DateTimeOriginal`` (with ``SubSecTimeOriginal``)
-at ``OffsetTimeOriginal``, or at a stated UTC offset for photos whose
-camera wrote none. Its exposure is EXIF ``ExposureTime`` x ISO /
+A frame's time is EXIF ``DateTimeOriginal`` at ``OffsetTimeOriginal``, or
+at a stated UTC offset for photos whose camera wrote none; frames are
+written in time order. Its exposure is EXIF ``ExposureTime`` x ISO /
 ``FNumber``^2 (s); written as ``frames[].exposure`` when every photo has it.
 The site is EXIF GPS (the first photo that has it) unless given.
 
@@ -76,10 +51,7 @@ the problem.
 
 from __future__ import annotations
 
-import datetime as _dt
-import math
 import os
-import re
 import tempfile
 import warnings
 from collections.abc import Sequence
@@ -91,25 +63,19 @@ import numpy as np
 import pandas as pd
 
 from . import bundle as _bundle
+from .camera_model import Camera, CaptureError, camera_rays, read_camera
+from .exif import photo_exposure, photo_site, photo_time
 from .geometry import Facets
 
 __all__ = [
-    "Camera",
     "CaptureError",
     "CaptureWarning",
+    "MadeBundle",
     "PHOTO_SUFFIXES",
-    "distort",
-    "undistort",
-    "read_camera",
-    "camera_rays",
-    "project",
     "load_mesh",
     "planar_regions",
     "mesh_facets",
     "label_image",
-    "photo_time",
-    "photo_exposure",
-    "photo_site",
     "find_photos",
     "make_bundle",
 ]
@@ -123,294 +89,9 @@ FACET_ANGLE = 10.0
 #: Default fewest labelled pixels a facet keeps.
 MIN_FACET_PIXELS = 10
 
-# EXIF tags (CIPA DC-008-2019, Exif 2.32)
-_EXIF_IFD, _GPS_IFD = 0x8769, 0x8825
-_DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9011, 0x9291
-_EXPOSURE_TIME, _F_NUMBER, _ISO = 0x829A, 0x829D, 0x8827
-_GPS_LAT_REF, _GPS_LAT, _GPS_LON_REF, _GPS_LON, _GPS_ALT_REF, _GPS_ALT = 1, 2, 3, 4, 5, 6
-_OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
-
-
-class CaptureError(ValueError):
-    """Bad input of :func:`make_bundle`: names the file, the field and the problem.
-
-    Attributes
-    ----------
-    kind : str
-        What the file is: "mesh", "camera", "photo", "photos".
-    file : str
-    field : str
-        The file's field (``"fx"``, ``"DateTimeOriginal"``) or part.
-    problem : str
-    """
-
-    def __init__(self, kind: str, file: Any, field: str, problem: str):
-        self.kind, self.file, self.field, self.problem = kind, str(file), field, problem
-        super().__init__(f"{kind} '{self.file}': field '{field}': {problem}")
-
-    def __reduce__(self):
-        return (type(self), (self.kind, self.file, self.field, self.problem))
-
 
 class CaptureWarning(UserWarning):
     """Something odd in a capture that still makes a bundle."""
-
-
-# ---------------------------------------------------------------------------
-# the camera
-# ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Camera:
-    """OpenCV's pinhole camera with distortion (see the module docstring).
-
-    Attributes
-    ----------
-    width, height : int
-        Image size [pixels].
-    fx, fy, cx, cy : float
-        Focal lengths and principal point, OpenCV pixel coordinates [pixels].
-    distortion : ndarray (5,)
-        k1, k2, p1, p2, k3 [-].
-    rotation : ndarray (3, 3)
-        World to camera (OpenCV's R) [-].
-    position : ndarray (3,)
-        Centre of projection, world frame [m].
-    """
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: np.ndarray
-    rotation: np.ndarray
-    position: np.ndarray
-
-
-def distort(xy: np.ndarray, distortion: Sequence[float]) -> np.ndarray:
-    """OpenCV's lens distortion of normalised image coordinates.
-
-    Brown-Conrady radial (k1, k2, k3) and tangential (p1, p2) terms, as
-    ``cv::projectPoints`` applies them (module docstring).
-
-    Parameters
-    ----------
-    xy : ndarray (..., 2)
-        Undistorted normalised coordinates (X_c / Z_c, Y_c / Z_c) [-].
-    distortion : sequence of 4 or 5 float
-        k1, k2, p1, p2[, k3] [-].
-
-    Returns
-    -------
-    ndarray (..., 2)
-        Distorted normalised coordinates [-].
-    """
-    k1, k2, p1, p2, k3 = _coefficients(distortion)
-    x, y = np.asarray(xy, dtype=float)[..., 0], np.asarray(xy, dtype=float)[..., 1]
-    r2 = x * x + y * y
-    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    return np.stack([xd, yd], axis=-1)
-
-
-def undistort(
-    xy: np.ndarray, distortion: Sequence[float], tol: float = 1e-12, max_iter: int = 50
-) -> np.ndarray:
-    """Invert :func:`distort` by Newton's method, point by point (vectorised).
-
-    Parameters
-    ----------
-    xy : ndarray (..., 2)
-        Distorted normalised coordinates [-].
-    distortion : sequence of 4 or 5 float
-        k1, k2, p1, p2[, k3] [-].
-    tol : float
-        Largest residual |distort(x) - xy| accepted [-].
-    max_iter : int
-        Newton steps at most [-].
-
-    Returns
-    -------
-    ndarray (..., 2)
-        Undistorted normalised coordinates; NaN where Newton's method did not
-        reach ``tol`` (points beyond where the model is invertible) [-].
-    """
-    target = np.asarray(xy, dtype=float)
-    k1, k2, p1, p2, k3 = _coefficients(distortion)
-    if not any((k1, k2, p1, p2, k3)):
-        return target.copy()
-    x, y = target[..., 0].copy(), target[..., 1].copy()
-    for _ in range(max_iter):
-        r2 = x * x + y * y
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        slope = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r^2
-        ex = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) - target[..., 0]
-        ey = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y - target[..., 1]
-        if np.nanmax(np.abs(np.concatenate([np.ravel(ex), np.ravel(ey)])), initial=0) < tol:
-            break
-        a = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x  # d xd / dx
-        b = 2 * x * y * slope + 2 * p1 * x + 2 * p2 * y  # d xd / dy = d yd / dx
-        d = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x  # d yd / dy
-        det = a * d - b * b
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x, y = x - (d * ex - b * ey) / det, y - (a * ey - b * ex) / det
-    residual = np.hypot(*np.moveaxis(distort(np.stack([x, y], -1), distortion) - target, -1, 0))
-    bad = ~(residual < max(tol, 1e-9))
-    x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
-    return np.stack([x, y], axis=-1)
-
-
-def _coefficients(distortion) -> tuple[float, ...]:
-    d = [float(v) for v in distortion]
-    if len(d) not in (4, 5):
-        raise ValueError(f"distortion needs k1, k2, p1, p2[, k3], got {len(d)} values")
-    return (*d, 0.0) if len(d) == 4 else tuple(d)
-
-
-def _rodrigues(rvec: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a rotation vector (axis x angle, rad), as cv::Rodrigues."""
-    theta = float(np.linalg.norm(rvec))
-    if theta < 1e-15:
-        return np.eye(3)
-    k = rvec / theta
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(theta) * kx + (1 - math.cos(theta)) * (kx @ kx)
-
-
-def read_camera(path: str | os.PathLike) -> Camera:
-    """Read a camera file (JSON; the module docstring gives its fields).
-
-    Raises
-    ------
-    CaptureError
-        For a file that is not a JSON object, a missing field, a value of the
-        wrong form (a rotation that is not a proper rotation within 1e-6,
-        focal lengths or an image size that are not positive).
-    """
-
-    def fail(field: str, problem: str) -> CaptureError:
-        return CaptureError("camera", path, field, problem)
-
-    import json
-
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise fail("file", "no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise fail("file", f"not a readable JSON file: {err}") from None
-    if not isinstance(data, dict):
-        raise fail("file", f"must be a JSON object, got {type(data).__name__}")
-
-    def number(key: str, positive: bool = False) -> float:
-        if key not in data:
-            raise fail(key, "missing required field")
-        value = data[key]
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
-            raise fail(key, f"must be a finite number, got {value!r}")
-        if positive and not value > 0:
-            raise fail(key, f"must be > 0, got {value!r}")
-        return float(value)
-
-    def array(key: str, shapes: tuple) -> np.ndarray:
-        try:
-            value = np.asarray(data[key], dtype=float)
-        except (TypeError, ValueError):
-            raise fail(key, f"must be numbers, got {data[key]!r}") from None
-        if value.shape not in shapes or not np.all(np.isfinite(value)):
-            raise fail(key, f"must be {' or '.join(_shape(s) for s in shapes)}, got {data[key]!r}")
-        return value
-
-    size = {}
-    for key in ("width", "height"):
-        value = number(key, positive=True)
-        if not value.is_integer():
-            raise fail(key, f"must be a whole number of pixels, got {data[key]!r}")
-        size[key] = int(value)
-    intrinsics = {k: number(k, positive=k in ("fx", "fy")) for k in ("fx", "fy", "cx", "cy")}
-    distortion = np.zeros(5)
-    if data.get("distortion") is not None:
-        given = array("distortion", ((4,), (5,)))
-        distortion[: len(given)] = given
-    if "rotation" not in data:
-        raise fail("rotation", "missing required field")
-    rotation = array("rotation", ((3, 3), (3,)))
-    if rotation.shape == (3,):
-        rotation = _rodrigues(rotation)
-    if not (
-        np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6) and np.linalg.det(rotation) > 0
-    ):
-        raise fail("rotation", "is not a rotation (R R^T = I and det R = +1 within 1e-6)")
-    if ("position" in data) == ("translation" in data):
-        raise fail("position", "give exactly one of position (C) or translation (t = -R C)")
-    if "position" in data:
-        position = array("position", ((3,),))
-    else:
-        position = -rotation.T @ array("translation", ((3,),))
-    return Camera(
-        size["width"], size["height"], **intrinsics, distortion=distortion,
-        rotation=rotation, position=position,
-    )  # fmt: skip
-
-
-def _shape(shape: tuple) -> str:
-    return {(3, 3): "a 3 x 3 matrix", (3,): "3 numbers"}.get(shape, f"{shape[0]} numbers")
-
-
-def camera_rays(camera: Camera, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Unit world directions of the rays that image at pixel coordinates (u, v).
-
-    Parameters
-    ----------
-    camera : Camera
-    u, v : ndarray
-        OpenCV pixel coordinates, broadcast together [pixels].
-
-    Returns
-    -------
-    ndarray (..., 3)
-        Unit vectors from the camera's centre, world frame; NaN where the
-        distortion cannot be inverted [-].
-    """
-    xd = (np.asarray(u, dtype=float) - camera.cx) / camera.fx
-    yd = (np.asarray(v, dtype=float) - camera.cy) / camera.fy
-    xy = undistort(np.stack(np.broadcast_arrays(xd, yd), axis=-1), camera.distortion)
-    d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
-    d = d_cam @ camera.rotation  # R^T d_cam, on the last axis
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def project(camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (u, v) of world points, and whether each is in front.
-
-    Parameters
-    ----------
-    camera : Camera
-    points : ndarray (..., 3)
-        World points [m].
-
-    Returns
-    -------
-    uv : ndarray (..., 2)
-        OpenCV pixel coordinates [pixels].
-    in_front : ndarray (...) of bool
-        Z_c > 0.
-    """
-    pc = (np.asarray(points, dtype=float) - camera.position) @ camera.rotation.T
-    z = pc[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xy = pc[..., :2] / z[..., None]
-    xyd = distort(xy, camera.distortion)
-    uv = np.stack([camera.fx * xyd[..., 0] + camera.cx, camera.fy * xyd[..., 1] + camera.cy], -1)
-    return uv, z > 0
 
 
 # ---------------------------------------------------------------------------
@@ -533,7 +214,7 @@ def planar_regions(
     graph = sparse.csr_array(
         (np.ones(len(both), dtype=bool), (both[:, 0], both[:, 1])), shape=(n_faces, n_faces)
     )
-    cos_max = math.cos(math.radians(max_angle))
+    cos_max = np.cos(np.radians(max_angle))
     region = np.full(n_faces, -1, dtype=np.int64)
     order = np.argsort(-np.asarray(area, dtype=float), kind="stable")
     count = 0
@@ -662,140 +343,8 @@ def _cast(mesh, face_region, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------
-# photos: EXIF times, exposures, site
+# photos
 # ---------------------------------------------------------------------------
-
-
-def _exif(path: Path) -> tuple[dict, dict, dict]:
-    """A photo's EXIF: the main IFD, the Exif IFD and the GPS IFD (tag -> value)."""
-    from PIL import Image
-
-    try:
-        with Image.open(path) as img:
-            exif = img.getexif()
-            return dict(exif), dict(exif.get_ifd(_EXIF_IFD)), dict(exif.get_ifd(_GPS_IFD))
-    except Exception as err:  # Pillow raises many kinds on a damaged file
-        raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
-
-
-def _utc_offset(text: str, path, field: str) -> _dt.timezone:
-    match = _OFFSET.match(str(text).strip())
-    if not match:
-        raise CaptureError("photo", path, field, f"not a UTC offset (+HH:MM): {text!r}")
-    sign, hours, minutes = match.groups()
-    delta = _dt.timedelta(hours=int(hours), minutes=int(minutes))
-    if delta > _dt.timedelta(hours=14) or int(minutes) >= 60:
-        raise CaptureError("photo", path, field, f"UTC offset {text!r} out of range")
-    return _dt.timezone(-delta if sign == "-" else delta)
-
-
-def photo_time(path: str | os.PathLike, utc_offset: str | None = None) -> pd.Timestamp:
-    """When a photo was taken: EXIF ``DateTimeOriginal`` at its UTC offset.
-
-    Parameters
-    ----------
-    path : str or path-like
-        JPEG, PNG or TIFF with EXIF. -
-    utc_offset : str, optional
-        ``+HH:MM``: the offset of the camera's clock, used where EXIF has no
-        ``OffsetTimeOriginal``. -
-
-    Returns
-    -------
-    pandas.Timestamp
-        Tz-aware, at the photo's offset (``SubSecTimeOriginal`` included).
-
-    Raises
-    ------
-    CaptureError
-        No ``DateTimeOriginal``, an unreadable one, or no offset in EXIF and
-        none given.
-    """
-    path = Path(path)
-    _, exif, _ = _exif(path)
-    stamp = exif.get(_DATETIME_ORIGINAL)
-    if not stamp:
-        raise CaptureError(
-            "photo", path, "DateTimeOriginal", "EXIF holds no time the photo was taken"
-        )
-    try:
-        when = _dt.datetime.strptime(str(stamp).strip().rstrip("\x00"), "%Y:%m:%d %H:%M:%S")
-    except ValueError:
-        raise CaptureError(
-            "photo", path, "DateTimeOriginal", f"not a time 'YYYY:MM:DD HH:MM:SS': {stamp!r}"
-        ) from None
-    subsec = str(exif.get(_SUBSEC_ORIGINAL, "")).strip().rstrip("\x00")
-    if subsec.isdigit():
-        when += _dt.timedelta(seconds=float(f"0.{subsec}"))
-    offset = exif.get(_OFFSET_TIME_ORIGINAL)
-    if offset:
-        zone = _utc_offset(str(offset).rstrip("\x00"), path, "OffsetTimeOriginal")
-    elif utc_offset is not None:
-        zone = _utc_offset(utc_offset, "--utc-offset", "--utc-offset")
-    else:
-        raise CaptureError(
-            "photo",
-            path,
-            "OffsetTimeOriginal",
-            f"EXIF gives the time {stamp} but no UTC offset; give the camera clock's "
-            "offset with --utc-offset +HH:MM",
-        )
-    return pd.Timestamp(when.replace(tzinfo=zone))
-
-
-def photo_exposure(path: str | os.PathLike) -> float | None:
-    """A photo's relative exposure from EXIF: ExposureTime x ISO / FNumber^2.
-
-    The factor between scene radiance and the sensor's linear signal, up to
-    one scale for a camera and lens (the spec's ``frames[].exposure``).
-
-    Returns
-    -------
-    float or None
-        [s] (ISO and f-number are unitless); None where EXIF lacks any of
-        the three or holds a non-positive one.
-    """
-    _, exif, _ = _exif(Path(path))
-    values = []
-    for tag in (_EXPOSURE_TIME, _F_NUMBER, _ISO):
-        value = exif.get(tag)
-        if isinstance(value, tuple | list):  # ISO may be a list of speeds
-            value = value[0] if value else None
-        try:
-            value = float(value)
-        except (TypeError, ValueError, ZeroDivisionError):
-            return None
-        if not (math.isfinite(value) and value > 0):
-            return None
-        values.append(value)
-    time, f_number, iso = values
-    return time * iso / f_number**2  # exposure ~ t S / N^2 (ISO 12232 exposure index)
-
-
-def _degrees(value) -> float:
-    d, m, s = (float(v) for v in value)
-    return d + m / 60 + s / 3600
-
-
-def photo_site(path: str | os.PathLike) -> tuple[float, float, float | None] | None:
-    """Latitude and longitude (deg, north and east positive) and altitude (m)
-    from EXIF GPS; None where the photo has no GPS position."""
-    _, _, gps = _exif(Path(path))
-    if _GPS_LAT not in gps or _GPS_LON not in gps:
-        return None
-    try:
-        lat = _degrees(gps[_GPS_LAT]) * (-1 if str(gps.get(_GPS_LAT_REF, "N"))[:1] == "S" else 1)
-        lon = _degrees(gps[_GPS_LON]) * (-1 if str(gps.get(_GPS_LON_REF, "E"))[:1] == "W" else 1)
-    except (TypeError, ValueError, ZeroDivisionError):
-        raise CaptureError("photo", path, "GPSLatitude", "unreadable GPS position") from None
-    alt = None
-    if _GPS_ALT in gps:
-        try:
-            below = gps.get(_GPS_ALT_REF, 0) in (1, b"\x01")
-            alt = float(gps[_GPS_ALT]) * (-1 if below else 1)
-        except (TypeError, ValueError, ZeroDivisionError):
-            alt = None
-    return lat, lon, alt
 
 
 def find_photos(items: Sequence[str | os.PathLike]) -> list[Path]:

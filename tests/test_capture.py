@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from bayesgloss import bundle as bd
-from bayesgloss import capture, cli
+from bayesgloss import camera_model, capture, cli, exif
 
 # -- helpers: files a user would have ------------------------------------------
 
@@ -214,20 +214,20 @@ def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
 def test_photo_time_with_offset_subseconds_and_stated_offset(tmp_path):
     pixels = np.zeros((4, 6, 3), np.uint8)
     p = write_photo(tmp_path / "a.jpg", pixels, "2024:06:21 14:30:05", "+02:00", subsec="25")
-    t = capture.photo_time(p)
+    t = exif.photo_time(p)
     assert t == pd.Timestamp("2024-06-21T12:30:05.25Z")
     assert t.isoformat() == "2024-06-21T14:30:05.250000+02:00"  # the camera's civil time kept
     # the photo's own offset wins over a stated one; a stated one serves where EXIF has none
-    assert capture.photo_time(p, utc_offset="-05:00") == t
+    assert exif.photo_time(p, utc_offset="-05:00") == t
     q = write_photo(tmp_path / "b.png", pixels, "2024:12:01 08:00:00")
-    assert capture.photo_time(q, utc_offset="-03:30") == pd.Timestamp("2024-12-01T11:30:00Z")
+    assert exif.photo_time(q, utc_offset="-03:30") == pd.Timestamp("2024-12-01T11:30:00Z")
     with pytest.raises(capture.CaptureError, match=r"b\.png'.*'OffsetTimeOriginal'.*--utc-offset"):
-        capture.photo_time(q)
+        exif.photo_time(q)
     with pytest.raises(capture.CaptureError, match="'--utc-offset'.*not a UTC offset"):
-        capture.photo_time(q, utc_offset="2h")
+        exif.photo_time(q, utc_offset="2h")
     r = write_photo(tmp_path / "c.jpg", pixels)
     with pytest.raises(capture.CaptureError, match=r"c\.jpg'.*'DateTimeOriginal'"):
-        capture.photo_time(r, utc_offset="+00:00")
+        exif.photo_time(r, utc_offset="+00:00")
 
 
 def test_photo_exposure_and_site_from_exif(tmp_path):
@@ -236,12 +236,12 @@ def test_photo_exposure_and_site_from_exif(tmp_path):
         tmp_path / "a.jpg", pixels, exposure=(1 / 250, 5.6, 400), gps=(-33.8568, 151.2153)
     )
     # t ISO / N^2 = (1/250) 400 / 5.6^2 (FNumber stored as 56/10)
-    assert capture.photo_exposure(p) == pytest.approx(400 / 250 / 5.6**2, rel=1e-12)
-    lat, lon, alt = capture.photo_site(p)
+    assert exif.photo_exposure(p) == pytest.approx(400 / 250 / 5.6**2, rel=1e-12)
+    lat, lon, alt = exif.photo_site(p)
     assert lat == pytest.approx(-33.8568, abs=1e-6) and lon == pytest.approx(151.2153, abs=1e-6)
     assert alt is None
     q = write_photo(tmp_path / "b.jpg", pixels)
-    assert capture.photo_exposure(q) is None and capture.photo_site(q) is None
+    assert exif.photo_exposure(q) is None and exif.photo_site(q) is None
 
 
 # -- the camera model ----------------------------------------------------------------
@@ -251,7 +251,7 @@ def test_distortion_round_trip_and_opencv_values():
     k = [-0.28, 0.09, 0.0012, -0.0008, -0.015]  # a wide-angle lens's sort of values
     x, y = np.meshgrid(np.linspace(-0.6, 0.6, 41), np.linspace(-0.45, 0.45, 31))
     xy = np.stack([x, y], -1)
-    back = capture.undistort(capture.distort(xy, k), k)
+    back = camera_model.undistort(camera_model.distort(xy, k), k)
     np.testing.assert_allclose(back, xy, atol=1e-10)
     # one point by hand from OpenCV's formula (cv::projectPoints' documentation)
     px, py = 0.3, -0.2
@@ -261,23 +261,24 @@ def test_distortion_round_trip_and_opencv_values():
         px * radial + 2 * k[2] * px * py + k[3] * (r2 + 2 * px * px),
         py * radial + k[2] * (r2 + 2 * py * py) + 2 * k[3] * px * py,
     ]
-    np.testing.assert_allclose(capture.distort([px, py], k), want, rtol=1e-14)
+    np.testing.assert_allclose(camera_model.distort([px, py], k), want, rtol=1e-14)
     # no distortion: the identity; four coefficients mean k3 = 0
-    np.testing.assert_array_equal(capture.undistort(xy, [0] * 5), xy)
-    np.testing.assert_allclose(capture.distort(xy, k[:4]), capture.distort(xy, [*k[:4], 0]))
+    np.testing.assert_array_equal(camera_model.undistort(xy, [0] * 5), xy)
+    four = camera_model.distort(xy, k[:4])
+    np.testing.assert_allclose(four, camera_model.distort(xy, [*k[:4], 0]))
 
 
 def test_camera_file_conventions(tmp_path):
     d = camera_dict([1.0, 2.0, 3.0], [0, 1, 0], [0, 0, 1], 100.0, 64, 48)
     (tmp_path / "c.json").write_text(json.dumps(d))
-    cam = capture.read_camera(tmp_path / "c.json")
+    cam = camera_model.read_camera(tmp_path / "c.json")
     # looking north: a point ahead images at the principal point, one to the east
     # to the right, one above upward (smaller v)
-    uv, front = capture.project(cam, [[1, 12, 3], [2, 12, 3], [1, 12, 4], [1, -8, 3]])
+    uv, front = camera_model.project(cam, [[1, 12, 3], [2, 12, 3], [1, 12, 4], [1, -8, 3]])
     np.testing.assert_allclose(uv[0], [31.5, 23.5])
     assert uv[1, 0] > 31.5 and uv[2, 1] < 23.5 and list(front) == [True, True, True, False]
     # the ray of a pixel goes back through the point that projects onto it
-    ray = capture.camera_rays(cam, uv[1, 0], uv[1, 1])
+    ray = camera_model.camera_rays(cam, uv[1, 0], uv[1, 1])
     np.testing.assert_allclose(ray, np.array([1, 10, 0]) / np.sqrt(101), atol=1e-12)
     # OpenCV's rvec and tvec give the same camera
     rvec = _rotation_vector(np.array(d["rotation"]))
@@ -286,7 +287,7 @@ def test_camera_file_conventions(tmp_path):
     (tmp_path / "c2.json").write_text(
         json.dumps({**d2, "rotation": rvec, "translation": tvec.tolist()})
     )
-    cam2 = capture.read_camera(tmp_path / "c2.json")
+    cam2 = camera_model.read_camera(tmp_path / "c2.json")
     np.testing.assert_allclose(cam2.rotation, cam.rotation, atol=1e-12)
     np.testing.assert_allclose(cam2.position, cam.position, atol=1e-12)
 
@@ -420,7 +421,7 @@ def _projection_check(made, cam, rng):
                                    strict=True):  # fmt: skip
         axes = np.eye(3)[np.abs(normal) < 0.5]  # the side's two in-plane axes
         points = center + rng.uniform(-0.5, 0.5, (4000, 2)) @ axes
-        uv, front = capture.project(cam, points)
+        uv, front = camera_model.project(cam, points)
         assert np.all(front)
         col, row = np.rint(uv).astype(int).T
         inside = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
@@ -437,7 +438,7 @@ def test_labels_in_a_distorted_camera_match_the_forward_projection(tmp_path):
     # aimed beside the box, so that it images off-centre where the distortion is strong
     mesh, camera, photos = _box_scene(tmp_path, k, (96, 72), aim=(-0.2, 0.9, 0.2))
     made = capture.make_bundle(mesh, camera, [photos], tmp_path / "out")
-    cam = capture.read_camera(camera)
+    cam = camera_model.read_camera(camera)
     own, other = _projection_check(made, cam, np.random.default_rng(1))
     assert other == 0 and own > 4000
     # the check can fail: labels made without the distortion put points in other sides

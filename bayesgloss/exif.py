@@ -1,0 +1,163 @@
+"""What a photo's EXIF says of when, how exposed and where it was taken.
+
+For :mod:`bayesgloss.capture` (``bayesgloss bundle make``): a frame's time
+is EXIF ``DateTimeOriginal`` (with ``SubSecTimeOriginal``) at
+``OffsetTimeOriginal``, or at a stated UTC offset for photos whose camera
+wrote none (:func:`photo_time`); its relative exposure is ``ExposureTime``
+x ISO / ``FNumber``^2 (:func:`photo_exposure`); the site is the GPS
+position (:func:`photo_site`). Tags as CIPA DC-008 (Exif 2.32) numbers
+them; read with Pillow, from JPEG, PNG (``eXIf``) and TIFF.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from .camera_model import CaptureError
+
+__all__ = ["photo_time", "photo_exposure", "photo_site"]
+
+# EXIF tags (CIPA DC-008-2019, Exif 2.32)
+_EXIF_IFD, _GPS_IFD = 0x8769, 0x8825
+_DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9011, 0x9291
+_EXPOSURE_TIME, _F_NUMBER, _ISO = 0x829A, 0x829D, 0x8827
+_GPS_LAT_REF, _GPS_LAT, _GPS_LON_REF, _GPS_LON, _GPS_ALT_REF, _GPS_ALT = 1, 2, 3, 4, 5, 6
+_OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
+
+
+def _exif(path: Path) -> tuple[dict, dict, dict]:
+    """A photo's EXIF: the main IFD, the Exif IFD and the GPS IFD (tag -> value)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as img:
+            exif = img.getexif()
+            return dict(exif), dict(exif.get_ifd(_EXIF_IFD)), dict(exif.get_ifd(_GPS_IFD))
+    except Exception as err:  # Pillow raises many kinds on a damaged file
+        raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
+
+
+def _utc_offset(text: str, path, field: str) -> _dt.timezone:
+    match = _OFFSET.match(str(text).strip())
+    if not match:
+        raise CaptureError("photo", path, field, f"not a UTC offset (+HH:MM): {text!r}")
+    sign, hours, minutes = match.groups()
+    delta = _dt.timedelta(hours=int(hours), minutes=int(minutes))
+    if delta > _dt.timedelta(hours=14) or int(minutes) >= 60:
+        raise CaptureError("photo", path, field, f"UTC offset {text!r} out of range")
+    return _dt.timezone(-delta if sign == "-" else delta)
+
+
+def photo_time(path: str | os.PathLike, utc_offset: str | None = None) -> pd.Timestamp:
+    """When a photo was taken: EXIF ``DateTimeOriginal`` at its UTC offset.
+
+    Parameters
+    ----------
+    path : str or path-like
+        JPEG, PNG or TIFF with EXIF. -
+    utc_offset : str, optional
+        ``+HH:MM``: the offset of the camera's clock, used where EXIF has no
+        ``OffsetTimeOriginal``. -
+
+    Returns
+    -------
+    pandas.Timestamp
+        Tz-aware, at the photo's offset (``SubSecTimeOriginal`` included).
+
+    Raises
+    ------
+    CaptureError
+        No ``DateTimeOriginal``, an unreadable one, or no offset in EXIF and
+        none given.
+    """
+    path = Path(path)
+    _, exif, _ = _exif(path)
+    stamp = exif.get(_DATETIME_ORIGINAL)
+    if not stamp:
+        raise CaptureError(
+            "photo", path, "DateTimeOriginal", "EXIF holds no time the photo was taken"
+        )
+    try:
+        when = _dt.datetime.strptime(str(stamp).strip().rstrip("\x00"), "%Y:%m:%d %H:%M:%S")
+    except ValueError:
+        raise CaptureError(
+            "photo", path, "DateTimeOriginal", f"not a time 'YYYY:MM:DD HH:MM:SS': {stamp!r}"
+        ) from None
+    subsec = str(exif.get(_SUBSEC_ORIGINAL, "")).strip().rstrip("\x00")
+    if subsec.isdigit():
+        when += _dt.timedelta(seconds=float(f"0.{subsec}"))
+    offset = exif.get(_OFFSET_TIME_ORIGINAL)
+    if offset:
+        zone = _utc_offset(str(offset).rstrip("\x00"), path, "OffsetTimeOriginal")
+    elif utc_offset is not None:
+        zone = _utc_offset(utc_offset, "--utc-offset", "--utc-offset")
+    else:
+        raise CaptureError(
+            "photo",
+            path,
+            "OffsetTimeOriginal",
+            f"EXIF gives the time {stamp} but no UTC offset; give the camera clock's "
+            "offset with --utc-offset +HH:MM",
+        )
+    return pd.Timestamp(when.replace(tzinfo=zone))
+
+
+def photo_exposure(path: str | os.PathLike) -> float | None:
+    """A photo's relative exposure from EXIF: ExposureTime x ISO / FNumber^2.
+
+    The factor between scene radiance and the sensor's linear signal, up to
+    one scale for a camera and lens (the spec's ``frames[].exposure``).
+
+    Returns
+    -------
+    float or None
+        [s] (ISO and f-number are unitless); None where EXIF lacks any of
+        the three or holds a non-positive one.
+    """
+    _, exif, _ = _exif(Path(path))
+    values = []
+    for tag in (_EXPOSURE_TIME, _F_NUMBER, _ISO):
+        value = exif.get(tag)
+        if isinstance(value, tuple | list):  # ISO may be a list of speeds
+            value = value[0] if value else None
+        try:
+            value = float(value)
+        except (TypeError, ValueError, ZeroDivisionError):
+            return None
+        if not (math.isfinite(value) and value > 0):
+            return None
+        values.append(value)
+    time, f_number, iso = values
+    return time * iso / f_number**2  # exposure ~ t S / N^2 (ISO 12232 exposure index)
+
+
+def _degrees(value) -> float:
+    d, m, s = (float(v) for v in value)
+    return d + m / 60 + s / 3600
+
+
+def photo_site(path: str | os.PathLike) -> tuple[float, float, float | None] | None:
+    """Latitude and longitude (deg, north and east positive) and altitude (m)
+    from EXIF GPS; None where the photo has no GPS position."""
+    _, _, gps = _exif(Path(path))
+    if _GPS_LAT not in gps or _GPS_LON not in gps:
+        return None
+    try:
+        lat = _degrees(gps[_GPS_LAT]) * (-1 if str(gps.get(_GPS_LAT_REF, "N"))[:1] == "S" else 1)
+        lon = _degrees(gps[_GPS_LON]) * (-1 if str(gps.get(_GPS_LON_REF, "E"))[:1] == "W" else 1)
+    except (TypeError, ValueError, ZeroDivisionError):
+        raise CaptureError("photo", path, "GPSLatitude", "unreadable GPS position") from None
+    alt = None
+    if _GPS_ALT in gps:
+        try:
+            below = gps.get(_GPS_ALT_REF, 0) in (1, b"\x01")
+            alt = float(gps[_GPS_ALT]) * (-1 if below else 1)
+        except (TypeError, ValueError, ZeroDivisionError):
+            alt = None
+    return lat, lon, alt
