@@ -73,6 +73,7 @@ __all__ = [
     "MadeBundle",
     "PHOTO_SUFFIXES",
     "load_mesh",
+    "site_frame",
     "planar_regions",
     "mesh_facets",
     "label_image",
@@ -165,6 +166,33 @@ def load_mesh(path: str | os.PathLike, transform: np.ndarray | None = None):
             faces = faces[:, ::-1]
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     return mesh, np.concatenate(group)
+
+
+def site_frame(north: float, origin: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Transform from a site-local frame (z up, metres) into the world frame.
+
+    A model made on site, or by CAD, often has z up but +y along a building's
+    axis rather than north. Its +y points toward the bearing ``north``; its
+    +x, 90 deg clockwise from that; its origin is at ``origin`` in the world.
+
+    Parameters
+    ----------
+    north : float
+        Bearing of the local +y axis, clockwise from true north [deg].
+    origin : sequence of 3 float
+        The local origin in the world frame [m].
+
+    Returns
+    -------
+    ndarray (4, 4)
+        World = M @ local (homogeneous column vectors) [-].
+    """
+    b = np.radians(north)
+    m = np.eye(4)
+    # local +y -> (sin b, cos b, 0) (bearing b), local +x -> (cos b, -sin b, 0) (b + 90 deg)
+    m[:2, :2] = [[np.cos(b), np.sin(b)], [-np.sin(b), np.cos(b)]]
+    m[:3, 3] = np.asarray(origin, dtype=float)
+    return m
 
 
 def planar_regions(

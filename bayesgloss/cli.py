@@ -417,6 +417,9 @@ def _bundle_make(args: argparse.Namespace) -> int:
     transform = None
     if args.mesh_transform:
         transform = _transform(args.mesh_transform)
+    if args.mesh_north is not None:  # the file's frame -> site-local -> world
+        north = capture.site_frame(args.mesh_north)
+        transform = north if transform is None else north @ transform
     t0 = time.perf_counter()
     made = capture.make_bundle(
         args.mesh,
@@ -654,6 +657,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="M",
         help="mesh to world: 16 comma-separated numbers, row by row, or a JSON file "
         "of a 4 x 4 matrix",
+    )
+    mk.add_argument(
+        "--mesh-north",
+        type=float,
+        metavar="DEG",
+        help="the mesh (after --mesh-transform) is z up in a site-local frame whose +y axis "
+        "points toward this bearing, deg clockwise from true north",
     )
     mk.add_argument(
         "--pixel-encoding",

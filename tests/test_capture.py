@@ -68,6 +68,12 @@ def write_photo(
     return path
 
 
+def srgb_grey(code):
+    """Linear value of an 8-bit sRGB grey code (IEC 61966-2-1)."""
+    v = code / 255
+    return v / 12.92 if v <= 0.04045 else ((v + 0.055) / 1.055) ** 2.4
+
+
 def camera_dict(position, forward, up, f, width, height, distortion=None):
     """OpenCV camera file fields: R's rows are right, down, forward."""
     fwd = np.asarray(forward, float) / np.linalg.norm(forward)
@@ -539,3 +545,70 @@ def test_a_mesh_wound_inside_out_gets_outward_normals_and_a_warning(tmp_path):
     np.testing.assert_allclose(
         sorted(map(tuple, normal)), [(-1, 0, 0), (0, -1, 0), (0, 0, 1)], atol=1e-12
     )
+
+
+def _assert_same_facets(made, reference):
+    """The same facets (normals, centres) and labels, whatever their numbering."""
+    dot = made.facets.normal @ reference.facets.normal.T
+    match = np.argmax(dot, axis=1)
+    assert np.all(dot.max(axis=1) > 1 - 1e-9) and len(set(match)) == len(match)
+    np.testing.assert_allclose(made.facets.center, reference.facets.center[match], atol=1e-6)
+    lookup = np.zeros(made.facets.ids.max() + 1, dtype=int)
+    lookup[made.facets.ids] = reference.facets.ids[match]
+    np.testing.assert_array_equal(lookup[made.labels], reference.labels)
+
+
+def test_png_photos_are_copied_and_a_transformed_stl_is_written_in_the_world_frame(tmp_path):
+    import trimesh
+
+    mesh, camera, photos = _box_scene(tmp_path)
+    reference = capture.make_bundle(mesh, camera, [photos], tmp_path / "ref")
+    # the same box in a y-up frame (x east, y up, z south), as STL, with its transform
+    box = trimesh.load_mesh(mesh)
+    to_world = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], float)
+    y_up = box.copy()
+    y_up.apply_transform(np.linalg.inv(to_world))
+    y_up.export(tmp_path / "box_y_up.stl")
+    # PNG photos of the same codes, with EXIF in eXIf chunks
+    pngs = tmp_path / "pngs"
+    pngs.mkdir()
+    for k, hour in enumerate((10, 14)):
+        write_photo(pngs / f"p{k}.png", np.full((36, 48, 3), 128, np.uint8),
+                    f"2024:06:21 {hour}:00:00", "+01:00", exposure=(1 / 125, 8.0, 100),
+                    gps=(51.5, -0.1))  # fmt: skip
+    transform = ",".join(f"{v:g}" for v in to_world.ravel())
+    out = tmp_path / "out"
+    assert _make(tmp_path / "box_y_up.stl", camera, pngs, out, "--mesh-transform", transform) == 0
+    with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.ply'"):
+        made = bd.read_bundle(out)
+    _assert_same_facets(made, reference)
+    assert [f.suffix for f in made.frame_files] == [".png", ".png"]
+    assert made.frame_files[0].read_bytes() == (pngs / "p0.png").read_bytes()
+    curves = bd.facet_curves(made)  # the reader decodes PNGs that carry an eXIf chunk
+    np.testing.assert_allclose(curves.luminance, srgb_grey(128), rtol=1e-6)
+    world = trimesh.load_mesh(out / "object_mesh.ply")
+    np.testing.assert_allclose(world.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 1]], atol=1e-12)
+
+
+def test_site_frame_turns_a_local_model_to_north():
+    m = capture.site_frame(90.0, origin=(5.0, 0.0, 0.0))
+    # local +y toward the east (bearing 90), local +x toward the south; origin moved
+    np.testing.assert_allclose(m @ [0, 1, 0, 0], [1, 0, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(m @ [1, 0, 0, 0], [0, -1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(m @ [0, 0, 0, 1], [5, 0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(capture.site_frame(0.0), np.eye(4))
+
+
+def test_mesh_north_gives_the_same_bundle_as_a_world_mesh(tmp_path):
+    import trimesh
+
+    mesh, camera, photos = _box_scene(tmp_path)
+    reference = capture.make_bundle(mesh, camera, [photos], tmp_path / "ref")
+    local = trimesh.load_mesh(mesh)
+    local.apply_transform(np.linalg.inv(capture.site_frame(30.0)))  # its +y at bearing 30
+    local.export(tmp_path / "local.ply")
+    assert _make(tmp_path / "local.ply", camera, photos, tmp_path / "out", "--mesh-north",
+                 "30") == 0  # fmt: skip
+    with pytest.warns(bd.BundleWarning):
+        made = bd.read_bundle(tmp_path / "out")
+    _assert_same_facets(made, reference)
