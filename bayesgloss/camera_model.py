@@ -54,6 +54,9 @@ __all__ = [
     "distort",
     "undistort",
     "read_camera",
+    "read_colmap",
+    "transform_camera",
+    "COLMAP_MODELS",
     "camera_rays",
     "project",
 ]
@@ -280,6 +283,149 @@ def read_camera(path: str | os.PathLike) -> Camera:
 
 def _shape(shape: tuple) -> str:
     return {(3, 3): "a 3 x 3 matrix", (3,): "3 numbers"}.get(shape, f"{shape[0]} numbers")
+
+
+#: COLMAP's camera models this module reads: id, name, parameter names.
+COLMAP_MODELS = {
+    0: ("SIMPLE_PINHOLE", ("f", "cx", "cy")),
+    1: ("PINHOLE", ("fx", "fy", "cx", "cy")),
+    2: ("SIMPLE_RADIAL", ("f", "cx", "cy", "k1")),
+    3: ("RADIAL", ("f", "cx", "cy", "k1", "k2")),
+    4: ("OPENCV", ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")),
+    6: ("FULL_OPENCV", ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")),
+}
+#: Parameter counts of COLMAP's other models (fisheye and others), to skip them in a binary file.
+_COLMAP_OTHER = {5: 8, 7: 5, 8: 4, 9: 5, 10: 12, 11: 5, 12: 13}
+
+
+def read_colmap(folder: str | os.PathLike, image_names: Sequence[str]) -> Camera:
+    """The camera of a COLMAP sparse model (``cameras`` and ``images``, .bin or .txt).
+
+    The pose is that of the first of ``image_names`` the model holds (a static
+    camera: its images' poses agree). COLMAP's pose is OpenCV's (world to
+    camera, qvec = (w, x, y, z), t), in the reconstruction's frame: give the
+    transform into the world frame with the mesh's (both are in that frame).
+    COLMAP puts the centre of the top-left pixel at (0.5, 0.5): cx and cy are
+    moved by -0.5 to OpenCV's convention. Models SIMPLE_PINHOLE, PINHOLE,
+    SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV (with k4 = k5 = k6 = 0).
+
+    Parameters
+    ----------
+    folder : str or path-like
+        The model's folder (``sparse/0``). -
+    image_names : sequence of str
+        Photo file names, matched against the model's image names (their
+        last path component). -
+
+    Raises
+    ------
+    CaptureError
+        Missing files, no image of those names, an unsupported camera model.
+    """
+    import struct
+
+    folder = Path(folder)
+
+    def fail(field: str, problem: str) -> CaptureError:
+        return CaptureError("camera", folder, field, problem)
+
+    binary = (folder / "cameras.bin").is_file() and (folder / "images.bin").is_file()
+    if not binary and not (
+        (folder / "cameras.txt").is_file() and (folder / "images.txt").is_file()
+    ):
+        raise fail("file", "not a COLMAP model: needs cameras.bin and images.bin (or .txt)")
+    cameras, images = {}, {}
+    try:
+        if binary:
+            data = (folder / "cameras.bin").read_bytes()
+            (count,), at = struct.unpack_from("<Q", data), 8
+            for _ in range(count):
+                cam_id, model, width, height = struct.unpack_from("<iiQQ", data, at)
+                at += 24
+                n = len(COLMAP_MODELS[model][1]) if model in COLMAP_MODELS else _COLMAP_OTHER[model]
+                cameras[cam_id] = (model, width, height, struct.unpack_from(f"<{n}d", data, at))
+                at += 8 * n
+            data = (folder / "images.bin").read_bytes()
+            (count,), at = struct.unpack_from("<Q", data), 8
+            for _ in range(count):
+                _, *pose, cam_id = struct.unpack_from("<i7di", data, at)
+                at += 64
+                end = data.index(b"\0", at)
+                name, at = data[at:end].decode(), end + 1
+                (n_points,) = struct.unpack_from("<Q", data, at)
+                at += 8 + 24 * n_points
+                images[Path(name).name] = (pose, cam_id)
+        else:
+            names = {v[0]: k for k, v in COLMAP_MODELS.items()}
+            for line in (folder / "cameras.txt").read_text().splitlines():
+                if line.strip() and not line.startswith("#"):
+                    cam_id, model, width, height, *params = line.split()
+                    model_id = names.get(model, -1)
+                    cameras[int(cam_id)] = (model_id, int(width), int(height),
+                                            tuple(map(float, params)))  # fmt: skip
+            lines = [x for x in (folder / "images.txt").read_text().splitlines()
+                     if not x.startswith("#")]  # fmt: skip
+            for line in lines[::2]:  # each image's line, then its points' (maybe empty)
+                _, *pose, cam_id, name = line.split(maxsplit=9)
+                images[Path(name).name] = (tuple(map(float, pose)), int(cam_id))
+    except (struct.error, KeyError, ValueError, IndexError, UnicodeDecodeError) as err:
+        raise fail("file", f"cannot read the COLMAP model: {type(err).__name__}: {err}") from None
+    found = [n for n in image_names if Path(n).name in images]
+    if not found:
+        raise fail("images", f"holds none of the photos (e.g. '{image_names[0]}')")
+    pose, cam_id = images[Path(found[0]).name]
+    if cam_id not in cameras:
+        raise fail("cameras", f"no camera {cam_id}, which image '{found[0]}' names")
+    model, width, height, params = cameras[cam_id]
+    if model not in COLMAP_MODELS:
+        raise fail("cameras", f"camera {cam_id}'s model is not one of "
+                   + ", ".join(m for m, _ in COLMAP_MODELS.values()))  # fmt: skip
+    name, keys = COLMAP_MODELS[model]
+    values = dict(zip(keys, params, strict=True))
+    if any(values.get(k, 0.0) for k in ("k4", "k5", "k6")):
+        raise fail("cameras", f"camera {cam_id} ({name}) has k4-k6 (rational distortion)")
+    fx, fy = values.get("fx", values.get("f")), values.get("fy", values.get("f"))
+    distortion = np.array([values.get(k, 0.0) for k in ("k1", "k2", "p1", "p2", "k3")])
+    qw, qx, qy, qz, *t = pose
+    q = np.array([qw, qx, qy, qz]) / np.linalg.norm([qw, qx, qy, qz])
+    w, x, y, z = q
+    rotation = np.array([  # unit quaternion to rotation matrix
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])  # fmt: skip
+    return Camera(
+        int(width), int(height), float(fx), float(fy),
+        values["cx"] - 0.5, values["cy"] - 0.5,  # COLMAP's pixel centres at +0.5
+        distortion=distortion, rotation=rotation, position=-rotation.T @ np.asarray(t),
+    )  # fmt: skip
+
+
+def transform_camera(camera: Camera, transform: np.ndarray) -> Camera:
+    """The same camera in another frame, by a similarity transform (scale, turn, shift).
+
+    Parameters
+    ----------
+    camera : Camera
+    transform : ndarray (4, 4)
+        New = M @ old (homogeneous); its 3 x 3 part s Q, Q a rotation, s > 0 [-].
+
+    Raises
+    ------
+    ValueError
+        For a transform that is not a similarity (a camera's angles would change).
+    """
+    m = np.asarray(transform, dtype=float)
+    linear = m[:3, :3]
+    scale = np.cbrt(np.linalg.det(linear))
+    turn = linear / scale if scale > 0 else linear
+    if not (scale > 0 and np.allclose(turn @ turn.T, np.eye(3), atol=1e-6)):
+        raise ValueError("a camera moves only by a similarity transform (scale, rotation, shift)")
+    return Camera(
+        camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
+        distortion=camera.distortion, rotation=camera.rotation @ turn.T,
+        position=linear @ camera.position + m[:3, 3],
+    )  # fmt: skip
 
 
 def camera_rays(camera: Camera, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -8,7 +8,8 @@ bundle from what a user of a tripod camera has:
   into it (:func:`load_mesh`);
 - a **camera** file (JSON, :func:`bayesgloss.camera_model.read_camera`, whose
   docstring gives the fields): OpenCV's pinhole model with its distortion,
-  and the pose;
+  and the pose; or a COLMAP sparse model of the photos
+  (:func:`bayesgloss.camera_model.read_colmap`), in the mesh's frame;
 - the **photos** (JPEG, PNG, TIFF) with their times, exposures and, perhaps,
   the site in EXIF (:mod:`bayesgloss.exif`).
 
@@ -63,7 +64,14 @@ import numpy as np
 import pandas as pd
 
 from . import bundle as _bundle
-from .camera_model import Camera, CaptureError, camera_rays, read_camera
+from .camera_model import (
+    Camera,
+    CaptureError,
+    camera_rays,
+    read_camera,
+    read_colmap,
+    transform_camera,
+)
 from .exif import photo_exposure, photo_site, photo_time
 from .geometry import Facets
 
@@ -490,7 +498,10 @@ def make_bundle(
     mesh : str or path-like
         OBJ, PLY or STL of the object (:func:`load_mesh`). -
     camera : str or path-like
-        Camera JSON file (:func:`read_camera`). -
+        Camera JSON file (:func:`bayesgloss.camera_model.read_camera`), or the
+        folder of a COLMAP sparse model of the photos
+        (:func:`bayesgloss.camera_model.read_colmap`), which is in the mesh's
+        frame: ``transform`` then moves the camera too. -
     photos : sequence of str or path-like
         Photo files and folders of photos (:func:`find_photos`); frames are
         written in time order. -
@@ -524,9 +535,17 @@ def make_bundle(
         photos without times, EXIF without an offset and none given, a camera
         that sees no facet of the mesh), naming the file, field and problem.
     """
-    cam = read_camera(camera)
-    world, group = load_mesh(mesh, transform)
     files = find_photos(photos)
+    if Path(camera).is_dir():  # a COLMAP model, in the mesh's (the reconstruction's) frame
+        cam = read_colmap(camera, [p.name for p in files])
+        if transform is not None:
+            try:
+                cam = transform_camera(cam, transform)
+            except ValueError as err:
+                raise CaptureError("camera", camera, "transform", str(err)) from None
+    else:
+        cam = read_camera(camera)
+    world, group = load_mesh(mesh, transform)
     if not 0 < facet_angle < 90:
         raise ValueError(f"facet_angle must lie in (0, 90) deg, got {facet_angle}")
     times = [photo_time(p, utc_offset) for p in files]

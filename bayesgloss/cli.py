@@ -618,8 +618,9 @@ def _parser() -> argparse.ArgumentParser:
     mk.add_argument(
         "--camera",
         required=True,
-        help="camera JSON file (fx, fy, cx, cy, width, "
-        "height, distortion, rotation, position; see bayesgloss.capture)",
+        help="camera JSON file (fx, fy, cx, cy, width, height, distortion, rotation, position; "
+        "see bayesgloss.camera_model), or a COLMAP sparse model folder of the photos (in the "
+        "mesh's frame: --mesh-transform and --mesh-north move it too)",
     )
     mk.add_argument(
         "--photos",

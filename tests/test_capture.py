@@ -612,3 +612,77 @@ def test_mesh_north_gives_the_same_bundle_as_a_world_mesh(tmp_path):
     with pytest.warns(bd.BundleWarning):
         made = bd.read_bundle(tmp_path / "out")
     _assert_same_facets(made, reference)
+
+
+# -- COLMAP models ------------------------------------------------------------------
+
+
+def _colmap_model(folder, cam, name="p0.jpg", binary=False, model="OPENCV"):
+    """A COLMAP sparse model of one image seen by an OpenCV camera: the pose as
+    qvec (w, x, y, z) and t = -R C, the principal point at COLMAP's +0.5."""
+    import struct
+
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = (float(v) for v in Rotation.from_matrix(cam.rotation).as_quat())
+    t = [float(v) for v in -cam.rotation @ cam.position]
+    k1, k2, p1, p2, _ = cam.distortion
+    params = {
+        "OPENCV": (4, [cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, k1, k2, p1, p2]),
+        "PINHOLE": (1, [cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5]),
+    }
+    model_id, values = params[model]
+    folder.mkdir(parents=True)
+    if binary:
+        head = struct.pack("<QiiQQ", 1, 1, model_id, cam.width, cam.height)
+        (folder / "cameras.bin").write_bytes(head + struct.pack(f"<{len(values)}d", *values))
+        image = struct.pack("<Qi7di", 1, 1, w, x, y, z, *t, 1) + name.encode() + b"\0"
+        image += struct.pack("<Q2dq", 1, 10.0, 12.0, -1)  # one 2-D point
+        (folder / "images.bin").write_bytes(image)
+    else:
+        (folder / "cameras.txt").write_text(
+            "# Camera list\n" + f"1 {model} {cam.width} {cam.height} "
+            + " ".join(repr(float(v)) for v in values) + "\n"
+        )  # fmt: skip
+        (folder / "images.txt").write_text(
+            "# Image list\n"
+            + f"1 {w!r} {x!r} {y!r} {z!r} {t[0]!r} {t[1]!r} {t[2]!r} 1 images/{name}\n\n"
+        )
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_a_colmap_model_gives_the_camera_files_camera(tmp_path, binary):
+    mesh, camera, photos = _box_scene(tmp_path, distortion=[-0.2, 0.05, 0.001, 0.0, 0.0])
+    cam = camera_model.read_camera(camera)
+    _colmap_model(tmp_path / "sparse", cam, binary=binary)
+    got = camera_model.read_colmap(tmp_path / "sparse", ["other.jpg", "p0.jpg"])
+    for field in ("fx", "fy", "cx", "cy", "width", "height"):
+        assert getattr(got, field) == pytest.approx(getattr(cam, field), rel=1e-12)
+    np.testing.assert_allclose(got.rotation, cam.rotation, atol=1e-12)
+    np.testing.assert_allclose(got.position, cam.position, atol=1e-12)
+    np.testing.assert_allclose(got.distortion, cam.distortion, atol=1e-15)
+    with pytest.raises(capture.CaptureError, match="field 'images': holds none of the photos"):
+        camera_model.read_colmap(tmp_path / "sparse", ["x.jpg"])
+
+
+def test_bundle_make_from_a_colmap_model_in_the_reconstructions_frame(tmp_path):
+    import trimesh
+
+    mesh, camera, photos = _box_scene(tmp_path)
+    reference = capture.make_bundle(mesh, camera, [photos], tmp_path / "ref")
+    # a reconstruction in its own frame: scaled by 2.5, turned, shifted from the world
+    to_world = capture.site_frame(40.0, origin=(3.0, -1.0, 0.2)) @ np.diag([0.4, 0.4, 0.4, 1])
+    to_recon = np.linalg.inv(to_world)
+    box = trimesh.load_mesh(mesh)
+    box.apply_transform(to_recon)
+    box.export(tmp_path / "recon.ply")
+    cam = camera_model.transform_camera(camera_model.read_camera(camera), to_recon)
+    _colmap_model(tmp_path / "sparse", cam, model="PINHOLE")
+    transform = ",".join(repr(float(v)) for v in to_world.ravel())
+    code = _make(tmp_path / "recon.ply", tmp_path / "sparse", photos, tmp_path / "out",
+                 "--mesh-transform", transform)  # fmt: skip
+    assert code == 0
+    with pytest.warns(bd.BundleWarning):
+        made = bd.read_bundle(tmp_path / "out")
+    _assert_same_facets(made, reference)
+    np.testing.assert_allclose(made.camera_position, camera_model.read_camera(camera).position)
