@@ -30,6 +30,21 @@ facet, so that the rise of the specular part across facets seen at
 different angles tells them. A bright material (A near 1) barely shows the
 raise; a dark one (A = 0.2: plastic of specularity 0.04 and colour 0.2) is
 dominated by it at views beyond about 70 degrees.
+
+Limits. Only the object's answer (the one-material model) has the raise;
+each facet's own posterior given the object's light
+(:func:`bayesgloss.sampling.facets_given_frames`) has none, so a facet's
+gamma there is its view angle's apparent one. Radiance's rough materials
+have no Fresnel term at all, real rough surfaces a softened one (Schlick's
+inside a microfacet lobe: not modelled). A is told only by how the raise
+grows over the facets' view angles, so it is weakly identified, and a
+misfit elsewhere (the sky's shape, a mirror's glint spread over a facet's
+pixels) moves it, and gamma with it: on the holdout's vs23 (smooth plastic,
+gamma 0.594, A 0.775, its own sky named) the model read A 0.52 and gamma
+0.547 [0.479, 0.569] where the model without the raise read 0.594; fitted
+to the forward model's own prediction of the same material it read 0.602
+[0.585, 0.618] (A 0.93, broad). Opt-in (``estimate --fresnel radiance``)
+until it does better on renders (studies/README.md, holdout run 4).
 """
 
 from __future__ import annotations
