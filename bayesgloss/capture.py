@@ -72,7 +72,7 @@ from .camera_model import (
     read_colmap,
     transform_camera,
 )
-from .exif import photo_exposure, photo_site, photo_time
+from .exif import photo_exposure, photo_orientation, photo_site, photo_time
 from .geometry import Facets
 
 __all__ = [
@@ -435,12 +435,18 @@ def _photo_pixels(path: Path, camera: Camera, camera_file) -> tuple[Any, str]:
     else:
         raise CaptureError("photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF")
     if size != (camera.width, camera.height):
+        turned = ""
+        if size == (camera.height, camera.width) and photo_orientation(path) >= 5:
+            turned = (
+                " (its EXIF Orientation turns it by 90 deg: the camera file must be of the "
+                "pixels as stored)"
+            )
         raise CaptureError(
             "photo",
             path,
             "size",
             f"is {size[0]} x {size[1]} pixels, camera '{camera_file}' says "
-            f"{camera.width} x {camera.height}",
+            f"{camera.width} x {camera.height}" + turned,
         )
     return frame, kind
 

@@ -21,12 +21,13 @@ import pandas as pd
 
 from .camera_model import CaptureError
 
-__all__ = ["photo_time", "photo_exposure", "photo_site"]
+__all__ = ["photo_time", "photo_exposure", "photo_site", "photo_orientation"]
 
 # EXIF tags (CIPA DC-008-2019, Exif 2.32)
 _EXIF_IFD, _GPS_IFD = 0x8769, 0x8825
 _DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9011, 0x9291
 _EXPOSURE_TIME, _F_NUMBER, _ISO = 0x829A, 0x829D, 0x8827
+_ORIENTATION = 0x0112
 _GPS_LAT_REF, _GPS_LAT, _GPS_LON_REF, _GPS_LON, _GPS_ALT_REF, _GPS_ALT = 1, 2, 3, 4, 5, 6
 _OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
 
@@ -161,3 +162,10 @@ def photo_site(path: str | os.PathLike) -> tuple[float, float, float | None] | N
         except (TypeError, ValueError, ZeroDivisionError):
             alt = None
     return lat, lon, alt
+
+
+def photo_orientation(path: str | os.PathLike) -> int:
+    """EXIF ``Orientation`` (1-8; 5-8 turn the stored image by 90 deg), 1 where absent."""
+    main, _, _ = _exif(Path(path))
+    value = main.get(_ORIENTATION, 1)
+    return int(value) if isinstance(value, int) and 1 <= value <= 8 else 1
