@@ -262,7 +262,7 @@ def planar_regions(
         frontier = np.array([seed])
         while len(frontier):
             rows = graph[frontier]
-            near = np.unique(rows.indices) if hasattr(rows, "indices") else np.array([], int)
+            near = np.unique(rows.indices)
             near = near[region[near] < 0]
             near = near[normal[near] @ seed_normal >= cos_max]
             region[near] = count
@@ -428,9 +428,14 @@ def _photo_pixels(path: Path, camera: Camera, camera_file) -> tuple[Any, str]:
     elif kind == "jpeg":
         try:
             with Image.open(path) as img:
-                frame = np.asarray(img.convert("RGB"))
+                kind = str(img.format).lower()
+                frame = np.asarray(img.convert("RGB")) if kind == "jpeg" else None
         except Exception as err:
             raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
+        if frame is None:
+            raise CaptureError(
+                "photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF"
+            )
         size = (frame.shape[1], frame.shape[0])
     else:
         raise CaptureError("photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF")
@@ -541,6 +546,8 @@ def make_bundle(
         photos without times, EXIF without an offset and none given, a camera
         that sees no facet of the mesh), naming the file, field and problem.
     """
+    if Path(out).exists() and not overwrite:
+        raise CaptureError("bundle", out, "--out", "exists; give --overwrite to replace it")
     files = find_photos(photos)
     if Path(camera).is_dir():  # a COLMAP model, in the mesh's (the reconstruction's) frame
         cam = read_colmap(camera, [p.name for p in files])

@@ -406,6 +406,10 @@ def test_bundle_make_on_a_box_uses_exif_site_and_exposure(tmp_path, capsys):
     mesh, camera, photos = _box_scene(tmp_path)
     assert _make(mesh, camera, photos, tmp_path / "out") == 0
     out = capsys.readouterr().out
+    assert _make(mesh, camera, photos, tmp_path / "out") == 2  # an existing bundle stays
+    assert "bundle '" in capsys.readouterr().err
+    assert _make(mesh, camera, photos, tmp_path / "out", "--overwrite") == 0
+    capsys.readouterr()
     assert "2 frames" in out and "3 facets seen of 6" in out, out
     with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.ply'"):
         b = bd.read_bundle(tmp_path / "out")
