@@ -98,14 +98,25 @@ def camera_dict(position, forward, up, f, width, height, distortion=None):
 # -- the key test: Radiance's frames, remade from mesh, camera file and JPEGs --------
 
 
-@pytest.fixture(scope="module")
-def rendered(tmp_path_factory):
-    """A small Radiance sequence of the paper's hemisphere as 8-bit sRGB frames
-    with per-frame auto-exposure, and the user's files made from it."""
+#: Objects rendered, and the facet angle that finds their facets: the hemisphere's
+#: top-ring neighbours are 2.9 deg apart, so 1 deg; the box and the gem: the default.
+RENDERED = {
+    "hemisphere": ({"shape": "hemisphere"}, 1.0),
+    "box": ({"shape": "box", "box_size": (1.2, 0.8, 1.0), "box_azimuth": 20.0}, 10.0),
+    "gem": ({"shape": "gem", "gem_azimuth": 10.0}, 10.0),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(RENDERED))
+def rendered(tmp_path_factory, request):
+    """A small Radiance sequence of the paper's hemisphere (or a turned box) as 8-bit
+    sRGB frames with per-frame auto-exposure, and the user's files made from it."""
     from bayesgloss import sequences
 
+    shape, angle = RENDERED[request.param]
     root = tmp_path_factory.mktemp("capture")
     cfg = sequences.SequenceConfig(
+        **shape,
         name="capture",
         view="SW",
         image_size=80,
@@ -140,35 +151,36 @@ def rendered(tmp_path_factory):
             subsec=f"{local[t].microsecond:06d}",
             exposure=(gains[t] / 250, 8.0, 200),
         )
-    return cfg, truth, root
+    return cfg, truth, root, angle
 
 
 @pytest.mark.radiance
 def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
-    cfg, truth, root = rendered
+    cfg, truth, root, angle = rendered
     out = root / "made"
     start = time.perf_counter()
     code = cli.main(
         [
             "bundle", "make", "--mesh", str(root / "object.obj"),
             "--camera", str(root / "camera.json"), "--photos", str(root / "photos"),
-            "--out", str(out), "--latitude", "40", "--longitude", "0", "--facet-angle", "1",
+            "--out", str(out), "--latitude", "40", "--longitude", "0", "--facet-angle",
+            str(angle),
         ]
     )  # fmt: skip
     seconds = time.perf_counter() - start
     assert code == 0, capsys.readouterr().err
     with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.obj' is not used yet"):
         made = bd.read_bundle(out)
-    print(f"bundle make: {seconds:.2f} s for {len(made)} frames of {made.shape}")
+    print(f"{cfg.shape}: bundle make {seconds:.2f} s for {len(made)} frames of {made.shape}")
 
-    # facets: each made facet is one of the hemisphere's (normal and centre)
-    hemisphere = cfg.facets()
-    dist = np.linalg.norm(made.facets.center[:, None] - hemisphere.center[None], axis=-1)
-    match = hemisphere.ids[np.argmin(dist, axis=1)]
+    # facets: each made facet is one of the object's (normal and centre)
+    rendered_facets = cfg.facets()
+    dist = np.linalg.norm(made.facets.center[:, None] - rendered_facets.center[None], axis=-1)
+    match = rendered_facets.ids[np.argmin(dist, axis=1)]
     assert np.all(dist.min(axis=1) < 1e-9)
     assert len(np.unique(match)) == len(match)
     k = np.argmin(dist, axis=1)
-    np.testing.assert_allclose(made.facets.normal, hemisphere.normal[k], atol=1e-9)
+    np.testing.assert_allclose(made.facets.normal, rendered_facets.normal[k], atol=1e-9)
 
     # labels: the renderer's own (centre and corner rays in rtrace) against ray casting
     lookup = np.zeros(made.facets.ids.max() + 1, dtype=int)
@@ -207,7 +219,7 @@ def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
     rel = np.abs(mine_lum[ok] / ref_lum[ok] - 1)
     print(f"curves: {ok.sum()} sun-lit entries, |rel. diff| median {np.median(rel):.4f}, "
           f"95 % {np.percentile(rel, 95):.4f}, max {rel.max():.4f}")  # fmt: skip
-    assert ok.sum() >= 50
+    assert ok.sum() >= 0.3 * ok.size  # hemisphere 65 of 110, box 7 of 15
     # 8-bit JPEG at quality 95 (4:4:4) against the renderer's 8-bit PNG: a code or two
     # per pixel, less in a facet's mean (measured: median 0.15 %, largest 1.0 %); the
     # issue's bar is 2 %
