@@ -63,12 +63,14 @@ __all__ = [
 
 
 class CaptureError(ValueError):
-    """Bad input of :func:`make_bundle`: names the file, the field and the problem.
+    """Bad input of :func:`bayesgloss.capture.make_bundle`: names the file, the
+    field and the problem.
 
     Attributes
     ----------
     kind : str
-        What the file is: "mesh", "camera", "photo", "photos".
+        What the file is: "mesh", "camera", "photo", "photos", "bundle" (the
+        output folder), "site" or "transform" (a command-line value).
     file : str
     field : str
         The file's field (``"fx"``, ``"DateTimeOriginal"``) or part.

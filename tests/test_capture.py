@@ -282,6 +282,10 @@ def test_distortion_round_trip_and_opencv_values():
     np.testing.assert_allclose(camera_model.distort([px, py], k), want, rtol=1e-14)
     # no distortion: the identity; four coefficients mean k3 = 0
     np.testing.assert_array_equal(camera_model.undistort(xy, [0] * 5), xy)
+    # beyond the model's reach (k1 = -0.6: r (1 - 0.6 r^2) is at most 0.497) and for
+    # NaN input, no undistorted point: NaN, not a wrong ray
+    far = camera_model.undistort([[0.6, 0.0], [np.nan, 0.1], [0.3, 0.1]], [-0.6, 0, 0, 0, 0])
+    assert np.all(np.isnan(far[:2])) and np.all(np.isfinite(far[2]))
     four = camera_model.distort(xy, k[:4])
     np.testing.assert_allclose(four, camera_model.distort(xy, [*k[:4], 0]))
 
