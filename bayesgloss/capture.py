@@ -87,6 +87,7 @@ __all__ = [
     "label_image",
     "find_photos",
     "make_bundle",
+    "label_overlay",
 ]
 
 #: File name endings of photos read from a folder.
@@ -645,6 +646,41 @@ def make_bundle(
     return MadeBundle(
         path, facets, labels, pd.DatetimeIndex(times).tz_convert("UTC"), exposure, len(normal)
     )
+
+
+def label_overlay(frame: np.ndarray, labels: np.ndarray, alpha: float = 0.5) -> np.ndarray:
+    """A frame with its label image laid over it, to check the mesh's registration.
+
+    Each facet gets its own colour (hues by the golden angle), blended with the
+    frame's pixels at ``alpha``; background and left-out pixels keep the frame.
+
+    Parameters
+    ----------
+    frame : ndarray (H, W, 3) or (H, W)
+        8-bit or 16-bit codes, or floats in [0, 1] [-].
+    labels : ndarray (H, W) of int
+        Facet id per pixel, 0 for none [-].
+    alpha : float
+        Weight of the facet colours [-].
+
+    Returns
+    -------
+    ndarray (H, W, 3) of uint8
+    """
+    rgb = np.asarray(frame)
+    if rgb.dtype.kind in "ui":
+        rgb = rgb / float(np.iinfo(rgb.dtype).max)
+    rgb = np.clip(np.nan_to_num(np.asarray(rgb, dtype=float)), 0.0, 1.0)
+    if rgb.ndim == 2:
+        rgb = np.repeat(rgb[..., None], 3, axis=-1)
+    rgb = rgb[..., :3]
+    hue = (np.arange(int(labels.max()) + 1) * 0.381966) % 1.0  # golden-angle hues
+    phase = hue[:, None] + np.array([0.0, 1 / 3, 2 / 3])
+    colour = 0.5 + 0.5 * np.cos(2 * np.pi * phase)  # a bright colour per hue
+    mask = labels > 0
+    out = rgb.copy()
+    out[mask] = (1 - alpha) * rgb[mask] + alpha * colour[labels[mask]]
+    return np.rint(out * 255).astype(np.uint8)
 
 
 def _site(files: list[Path], latitude, longitude, elevation) -> dict:

@@ -437,6 +437,18 @@ def _bundle_make(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
     )
     labelled = int(np.count_nonzero(made.labels))
+    if args.overlay:
+        import json
+
+        from PIL import Image
+
+        from .bundle import MANIFEST, read_image
+
+        middle = len(made.times) // 2  # a frame of the day's middle: the sun up
+        manifest = json.loads((made.path / MANIFEST).read_text(encoding="utf-8"))
+        pixels, _ = read_image(made.path / manifest["frames"][middle]["file"])
+        Image.fromarray(capture.label_overlay(pixels, made.labels)).save(args.overlay)
+        print(f"labels over frame {middle}: {args.overlay}")
     print(
         f"bundle {made.path}: {len(made.times)} frames "
         f"({made.times[0].isoformat()} to {made.times[-1].isoformat()} UTC), "
@@ -670,6 +682,12 @@ def _parser() -> argparse.ArgumentParser:
         "--pixel-encoding",
         default="srgb",
         help="of PNG and TIFF photos (default: srgb; JPEGs are srgb)",
+    )
+    mk.add_argument(
+        "--overlay",
+        metavar="PNG",
+        help="also write the label image over the middle frame, to check the mesh's "
+        "registration by eye",
     )
     mk.add_argument("--overwrite", action="store_true", help="replace an existing bundle")
     mk.set_defaults(func=_bundle_make)

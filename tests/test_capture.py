@@ -171,6 +171,15 @@ def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
     assert code == 0, capsys.readouterr().err
     with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.obj' is not used yet"):
         made = bd.read_bundle(out)
+    overlay = root / "overlay.png"
+    labels_over = capture.label_overlay(made.read_frame(2)[0], made.labels)
+    assert _make(root / "object.obj", root / "camera.json", root / "photos", root / "again",
+                 "--latitude", "40", "--longitude", "0", "--facet-angle", str(angle),
+                 "--overlay", str(overlay)) == 0  # fmt: skip
+    from PIL import Image
+
+    with Image.open(overlay) as img:
+        np.testing.assert_array_equal(np.asarray(img), labels_over)
     print(f"{cfg.shape}: bundle make {seconds:.2f} s for {len(made)} frames of {made.shape}")
 
     # facets: each made facet is one of the object's (normal and centre)
@@ -608,6 +617,20 @@ def test_png_photos_are_copied_and_a_transformed_stl_is_written_in_the_world_fra
     np.testing.assert_allclose(curves.luminance, srgb_grey(128), rtol=1e-6)
     world = trimesh.load_mesh(out / "object_mesh.ply")
     np.testing.assert_allclose(world.bounds, [[-0.5, -0.5, 0], [0.5, 0.5, 1]], atol=1e-12)
+
+
+def test_label_overlay_keeps_the_frame_outside_the_labels():
+    frame = np.full((4, 5, 3), 200, np.uint8)
+    labels = np.zeros((4, 5), int)
+    labels[1:3, 1:3] = 1
+    labels[0, 4] = 7
+    out = capture.label_overlay(frame, labels, alpha=0.5)
+    assert out.dtype == np.uint8 and out.shape == (4, 5, 3)
+    np.testing.assert_array_equal(out[labels == 0], frame[labels == 0])
+    assert np.all(out[1, 1] == out[2, 2]) and not np.all(out[1, 1] == out[0, 4])
+    assert not np.all(out[1, 1] == frame[1, 1])
+    grey16 = capture.label_overlay(np.full((4, 5), 65535, np.uint16), labels)
+    np.testing.assert_array_equal(grey16[labels == 0], 255)
 
 
 def test_site_frame_turns_a_local_model_to_north():
