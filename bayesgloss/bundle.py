@@ -176,6 +176,9 @@ MESH_SUFFIXES = (".obj", ".ply")
 #: Facets with fewer labelled pixels are reported as ``too-few-pixels``.
 MIN_PIXELS = 4
 #: Reasons an observation is left out, in the order of :attr:`FacetCurves.flag_bits`.
+#: ``partly-shadowed`` and ``shadowed-by-object`` come from a bundle's
+#: ``object_mesh`` and are set by :func:`bayesgloss.visibility.shadow_flags`,
+#: not by :func:`facet_curves`.
 FLAG_REASONS = (
     "sun-below-horizon",
     "nan-pixels",
@@ -183,6 +186,8 @@ FLAG_REASONS = (
     "too-few-pixels",
     "negative-luminance",
     "seen-from-behind",
+    "partly-shadowed",
+    "shadowed-by-object",
 )
 #: Robust summaries of a facet's pixel luminances.
 STATISTICS = ("mean", "median")
@@ -924,8 +929,9 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         if not mesh.is_file():
             raise check.fail("object_mesh", f"missing mesh '{parsed.object_mesh}'")
         warnings.warn(
-            f"bundle '{path}': object_mesh '{parsed.object_mesh}' is not used yet; "
-            "the object is taken as convex and alone on the ground",
+            f"bundle '{path}': object_mesh '{parsed.object_mesh}' is used only to leave out "
+            "frames where the mesh shadows part or all of a facet (bayesgloss.visibility); "
+            "the sky and ground it hides are not yet modelled",
             BundleWarning,
             stacklevel=2,
         )
@@ -1167,6 +1173,9 @@ def facet_curves(
         "too-few-pixels": (n_pixels < min_pixels)[:, None],
         "negative-luminance": luminance < 0.0,
         "seen-from-behind": (facing_camera(bundle.camera_position, bundle.facets) <= 0.0)[:, None],
+        # set from the bundle's object_mesh by bayesgloss.visibility.shadow_flags
+        "partly-shadowed": False,
+        "shadowed-by-object": False,
     }
     bits = np.zeros((n_facets, n_frames), np.uint8)
     for k, reason in enumerate(FLAG_REASONS):  # bit k: FLAG_REASONS[k]

@@ -135,6 +135,7 @@ def _curves(args: argparse.Namespace) -> int:
     import warnings
 
     from . import bundle as bundle_io
+    from .visibility import shadow_flags
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", bundle_io.BundleWarning)
@@ -142,6 +143,7 @@ def _curves(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"bayesgloss curves: warning: {w.message}", file=sys.stderr)
     curves = bundle_io.facet_curves(bundle, statistic=args.statistic, min_pixels=args.min_pixels)
+    curves = shadow_flags(bundle, curves)  # where the bundle has an object_mesh
     if args.csv == "-":
         curves.to_csv(sys.stdout)
     elif args.csv:

@@ -308,7 +308,7 @@ def bundle_models(
     for ill in illumination:
         _check("illumination", ill, estimate.ILLUMINATION_MODELS)
     b = b if isinstance(b, bundle_io.Bundle) else bundle_io.read_bundle(b)
-    curves = bundle_io.facet_curves(b)
+    curves = estimate.bundle_curves(b)
     y, usable, censored = estimate.observations(curves)
     keep = bundle_io.usable_facets(b, usable, min_frames, censored)
     models = {}

@@ -101,6 +101,7 @@ from .results import (
     result_files,
     write_result,
 )
+from .visibility import shadow_flags
 
 __all__ = [
     "RESULT_FILES",
@@ -115,6 +116,7 @@ __all__ = [
     "bundle_bases",
     "bundle_sky",
     "observations",
+    "bundle_curves",
     "EstimateResult",
     "estimate_bundle",
     "to_inference_data",
@@ -148,6 +150,23 @@ def bundle_bases(
     )
 
 
+def bundle_curves(b) -> bundle_io.FacetCurves:
+    """A bundle's facet curves (:func:`bayesgloss.bundle.facet_curves`), with
+    the shadows of its ``object_mesh`` flagged where it has one
+    (:func:`bayesgloss.visibility.shadow_flags`).
+
+    Entries partly in the mesh's shadow (``partly-shadowed``: their pixels
+    mix lit and shadowed surface) and entries wholly in it where the convex
+    forward model would give the facet direct sun (``shadowed-by-object``)
+    are flagged and so left out of the likelihood. Entries in shadow where
+    the convex model agrees (sun behind the facet) are kept. The forward
+    model itself is unchanged: the sky and ground the mesh hides from a
+    kept entry are still counted as seen (a documented limitation). A
+    bundle without ``object_mesh`` gets exactly :func:`facet_curves`'s result.
+    """
+    return shadow_flags(b, bundle_io.facet_curves(b))
+
+
 def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(y, usable, censored) from a bundle's facet curves.
 
@@ -155,7 +174,9 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     statistic with its saturated pixels at the top code
     (:attr:`bayesgloss.bundle.FacetCurves.lower_bound`), a lower bound of
     its true value, also where every pixel of the facet saturates. Every
-    other flag leaves the entry out.
+    other flag leaves the entry out (also ``partly-shadowed`` and
+    ``shadowed-by-object``, set by :func:`bundle_curves` from an
+    ``object_mesh``).
     """
     sat_bit = 1 << bundle_io.FLAG_REASONS.index("saturated")
     only_saturated = curves.flag_bits == sat_bit
@@ -345,7 +366,7 @@ def estimate_bundle(
     fresnel = fresnel or DEFAULT_FRESNEL
     if fresnel not in FRESNEL_MODELS:
         raise ValueError(f"unknown Fresnel model {fresnel!r}; valid: {', '.join(FRESNEL_MODELS)}")
-    curves = bundle_io.facet_curves(b)
+    curves = bundle_curves(b)
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES, censored)

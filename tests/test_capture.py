@@ -169,7 +169,9 @@ def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
     )  # fmt: skip
     seconds = time.perf_counter() - start
     assert code == 0, capsys.readouterr().err
-    with pytest.warns(bd.BundleWarning, match="object_mesh 'object_mesh.obj' is not used yet"):
+    with pytest.warns(
+        bd.BundleWarning, match="object_mesh 'object_mesh.obj' is used only to leave out"
+    ):
         made = bd.read_bundle(out)
     overlay = root / "overlay.png"
     labels_over = capture.label_overlay(made.read_frame(2)[0], made.labels)
