@@ -106,9 +106,10 @@ def test_sunlit_fraction_matches_rtrace():
         assert v.sunlit_fraction[0, t] == pytest.approx(lit.mean(), abs=0.06), SUNS[t]
         # point by point: each point a facet of its own
         each = vis.sunlit_fraction(mesh, points[0][:, None], up[0][:, None], up[0], d[None])[:, 0]
-        agree.append(np.mean(radiance_lit(mesh, points[0], d) == (each > 0)))
+        agree.append(float(np.mean(radiance_lit(mesh, points[0], d) == (each > 0))))
         assert each.mean() == v.sunlit_fraction[0, t]
     assert min(agree) >= 63 / 64, agree
+    print("points agreeing with rtrace:", agree)
     f = np.array(fractions)
     # the cases: partly lit, wholly lit, wholly shadowed
     assert f[1, 0] == 1.0 and v.sunlit_fraction[0, 1] == 1.0
