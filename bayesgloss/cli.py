@@ -330,6 +330,7 @@ def _estimate_many(args, progress) -> int:
                 "max_steps": args.max_steps or (JOINT_MAX_SWEEPS if args.per_frame else 8000),
                 # only where set, so that other runs keep their units' keys
                 **({"per_frame": True} if args.per_frame else {}),
+                **({"fresnel": args.fresnel} if args.fresnel else {}),
                 "bundle_content": content,
             },
         )

@@ -580,6 +580,7 @@ def estimate_unit(
     max_steps: int | None = 8000,
     per_frame: bool = False,
     bundle_content: str | None = None,
+    fresnel: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -589,7 +590,9 @@ def estimate_unit(
     bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
-    changed since is an error.
+    changed since is an error. ``fresnel``: as :func:`estimate_bundle`'s
+    (given in a unit's options only where set, so that other runs keep
+    their units' keys).
     """
     b = bundle_io.read_bundle(bundle)
     if bundle_content is not None and bundle_io.bundle_digest(b) != bundle_content:
@@ -606,5 +609,6 @@ def estimate_unit(
         seed=seed,
         jobs=1,
         sampler_options={"max_steps": max_steps},
+        fresnel=fresnel,
     )
     return result_files(res)
