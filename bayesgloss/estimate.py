@@ -80,7 +80,7 @@ from . import bundle as bundle_io
 from . import diagnostics, render, sampling, sky, sky_families
 from . import likelihood as lk
 from ._thirdparty import arviz
-from .fresnel import FRESNEL_MODELS
+from .fresnel import check_fresnel_model
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
@@ -363,9 +363,7 @@ def estimate_bundle(
     """
     b = path if isinstance(path, bundle_io.Bundle) else bundle_io.read_bundle(path)
     sampler_options = {k: v for k, v in (sampler_options or {}).items() if v is not None}
-    fresnel = fresnel or DEFAULT_FRESNEL
-    if fresnel not in FRESNEL_MODELS:
-        raise ValueError(f"unknown Fresnel model {fresnel!r}; valid: {', '.join(FRESNEL_MODELS)}")
+    fresnel = check_fresnel_model(fresnel or DEFAULT_FRESNEL)
     curves = bundle_curves(b)
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)

@@ -62,6 +62,7 @@ __all__ = [
     "FresnelTerms",
     "fresnel_terms",
     "fresnel_parts",
+    "check_fresnel_model",
     "log_prior_fresnel",
     "sample_prior_fresnel",
 ]
@@ -79,6 +80,13 @@ FRESNEL_COLUMNS = (4, 5)
 #: Range of the normal-incidence albedo A under its log-uniform prior [-]:
 #: from a near-black material to a white one.
 NORMAL_ALBEDO_RANGE = (0.02, 1.0)
+
+
+def check_fresnel_model(name: str) -> str:
+    """``name`` if it is one of :data:`FRESNEL_MODELS`, else a ValueError listing them."""
+    if name not in FRESNEL_MODELS:
+        raise ValueError(f"unknown Fresnel model {name!r}; valid: {', '.join(FRESNEL_MODELS)}")
+    return name
 
 
 @dataclass(frozen=True)

@@ -248,8 +248,7 @@ def illumination_bases(
             factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)
         d_parts.append(other.diffuse * factor)
         g_parts.append(other.glossy * factor)
-    sun_dir = np.asarray(day.sun_direction, dtype=float)
-    e_sun = np.where(sun_dir[:, 2] > 0, sun_a * day.sun_solid_angle, 0.0)  # render._sun_terms
+    sun_dir, e_sun = render._sun_terms(day)  # the disc's normal irradiance, 0 below the horizon
     return IlluminationBases(
         np.stack(d_parts),
         np.stack(g_parts),
@@ -410,10 +409,7 @@ def joint_data(
     fresnel : {"none", "radiance"}
         The one-material model's Fresnel model (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
     """
-    if fresnel not in fr.FRESNEL_MODELS:
-        raise ValueError(
-            f"unknown Fresnel model {fresnel!r}; valid: {', '.join(fr.FRESNEL_MODELS)}"
-        )
+    fr.check_fresnel_model(fresnel)
     if fresnel != "none" and bases.fresnel is None:
         raise ValueError("Fresnel model needs bases with Fresnel terms (illumination_bases)")
     y = np.asarray(y, dtype=float)
