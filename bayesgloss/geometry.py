@@ -5,7 +5,11 @@ flat facets standing on a ground plane at the origin of the world frame
 (x east, y north, z up, metres). The paper does not give its tessellation;
 :func:`tessellated_hemisphere` builds rings of planar quadrilaterals (each an
 isosceles trapezoid, hence exactly planar) capped by a fan of triangles.
-Other shapes: a :func:`box` and a brilliant-cut-like convex :func:`gem`.
+Other shapes: a :func:`box` and a brilliant-cut-like convex :func:`gem`, and
+one that is not convex, an L-shaped building of two wings
+(:func:`l_building`), whose wings shadow each other and hide part of each
+other's sky. :func:`triangles` and :func:`write_obj` turn any of them into a
+triangle mesh (the ``object_mesh`` of a bundle, ``bundle make``'s input).
 """
 
 from __future__ import annotations
@@ -19,6 +23,9 @@ __all__ = [
     "tessellated_hemisphere",
     "box",
     "gem",
+    "l_building",
+    "triangles",
+    "write_obj",
     "view_directions",
     "CAMERA_AZIMUTHS",
     "camera_position",
@@ -263,6 +270,144 @@ def gem(
     rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
     c = np.asarray(center, dtype=float)
     return _outward([p @ rot.T + c for p in polys])
+
+
+def l_building(
+    wing_length: float = 3.0,
+    wing_width: float = 1.0,
+    heights=(1.0, 1.5),
+    azimuth: float = 0.0,
+    center=(0.0, 0.0, 0.0),
+) -> Facets:
+    """An L-shaped building of two wings on the ground: a non-convex object.
+
+    Before turning, a north wing along x and an east wing along y meet in the
+    north-east corner of a ``wing_length`` square footprint, each
+    ``wing_width`` wide; the L's inner corner opens toward the south-west.
+    The east wing is the taller (``heights`` = north wing's, east wing's):
+    its west wall rises above the north wing's roof, and it shadows that roof
+    and the north wing's inner, south-facing wall in the morning; the north
+    wing shadows the east wing's inner, west-facing wall in the evening (June,
+    northern mid-latitudes). No bottom faces (it stands on the ground).
+
+    Parameters
+    ----------
+    wing_length : float
+        Side of the square footprint, each wing's length [m].
+    wing_width : float
+        Width of each wing, less than ``wing_length`` [m].
+    heights : sequence of 2 float
+        Heights of the north and the east wing; the east wing's must be at
+        least the north wing's [m].
+    azimuth : float
+        Rotation about the vertical, clockwise seen from above [deg].
+    center : sequence of 3 float
+        Centre of the footprint's bounding square on the ground [m].
+
+    Returns
+    -------
+    Facets
+        8 planar facets, numbered from 1: the east wing's roof, the north
+        wing's roof, the east wing's east, south and west walls (the west
+        wall L-shaped where it rises above the north roof; equal heights
+        make it a rectangle), the north wing's inner (south) and west walls,
+        and the north wall (L-shaped). Outward normals; each polygon's
+        vertices counter-clockwise seen from outside, starting at a vertex
+        from which the polygon is star-shaped, so the fan of triangles from
+        its first vertex (:func:`triangles`) tiles it.
+    """
+    w, d = float(wing_length), float(wing_width)
+    hn, he = (float(h) for h in heights)
+    if not (0 < d < w and 0 < hn <= he):
+        raise ValueError(
+            f"need 0 < wing_width < wing_length and 0 < heights[0] <= heights[1], got "
+            f"{wing_length}, {wing_width}, {tuple(heights)}"
+        )
+    x0 = w - d  # the east wing's west wall, and the north wing's inner wall at y = x0
+    raw = [
+        ([[x0, 0, he], [w, 0, he], [w, w, he], [x0, w, he]], (0, 0, 1)),  # east roof
+        ([[0, x0, hn], [x0, x0, hn], [x0, w, hn], [0, w, hn]], (0, 0, 1)),  # north roof
+        ([[w, 0, 0], [w, w, 0], [w, w, he], [w, 0, he]], (1, 0, 0)),  # east wall
+        ([[x0, 0, 0], [w, 0, 0], [w, 0, he], [x0, 0, he]], (0, -1, 0)),  # east wing's south
+        (  # east wing's west wall, from its reflex corner (x0, x0, hn)
+            [[x0, x0, hn], [x0, w, hn], [x0, w, he], [x0, 0, he], [x0, 0, 0], [x0, x0, 0]]
+            if he > hn
+            else [[x0, 0, 0], [x0, x0, 0], [x0, x0, he], [x0, 0, he]],
+            (-1, 0, 0),
+        ),
+        ([[0, x0, 0], [x0, x0, 0], [x0, x0, hn], [0, x0, hn]], (0, -1, 0)),  # north's inner
+        ([[0, x0, 0], [0, w, 0], [0, w, hn], [0, x0, hn]], (-1, 0, 0)),  # north's west
+        (  # north wall, from its reflex corner (x0, w, hn)
+            [[x0, w, hn], [0, w, hn], [0, w, 0], [w, w, 0], [w, w, he], [x0, w, he]]
+            if he > hn
+            else [[0, w, 0], [w, w, 0], [w, w, he], [0, w, he]],
+            (0, 1, 0),
+        ),
+    ]
+    a = -np.radians(azimuth)  # clockwise seen from above
+    rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    shift = np.asarray(center, dtype=float) - [w / 2, w / 2, 0.0]
+    polygons = []
+    for vertices, outward in raw:
+        p = np.array(vertices, dtype=float)
+        normal, _ = _polygon_normal_centroid(p)
+        if normal @ outward < 0:  # counter-clockwise seen from outside, same first vertex
+            p = np.concatenate([p[:1], p[:0:-1]])
+        polygons.append((p + shift) @ rot.T)
+    normals, centers = zip(*(_polygon_normal_centroid(p) for p in polygons), strict=True)
+    return Facets(np.arange(1, len(polygons) + 1), np.array(normals), np.array(centers), polygons)
+
+
+def triangles(facets: Facets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A triangle mesh of facets: each polygon a fan from its first vertex.
+
+    The fan tiles a polygon that is convex or star-shaped from its first
+    vertex (every shape of this module). Vertices are not shared between
+    facets, so a mesh's region growing (:func:`bayesgloss.capture.planar_regions`)
+    finds each facet as one region whatever the angle between neighbours.
+
+    Parameters
+    ----------
+    facets : Facets
+        With polygons [m].
+
+    Returns
+    -------
+    vertices : ndarray (V, 3)
+        [m]
+    faces : ndarray (T, 3) of int
+        Vertex indices, counter-clockwise seen from outside [-].
+    face_facet : ndarray (T,) of int
+        The facet id of each triangle [-].
+    """
+    vertices, faces, owner, first = [], [], [], 0
+    for fid, poly in zip(facets.ids, facets.polygons, strict=True):
+        p = np.asarray(poly, dtype=float)
+        k = np.arange(1, len(p) - 1)
+        vertices.append(p)
+        faces.append(np.column_stack([np.zeros_like(k), k, k + 1]) + first)
+        owner.append(np.full(len(k), fid))
+        first += len(p)
+    return np.concatenate(vertices), np.concatenate(faces), np.concatenate(owner)
+
+
+def write_obj(facets: Facets, path) -> None:
+    """Write facets as a Wavefront OBJ triangle mesh (:func:`triangles`), 17 digits.
+
+    Parameters
+    ----------
+    facets : Facets
+        World frame [m].
+    path : str or path-like
+        The file to write. -
+    """
+    from pathlib import Path
+
+    vertices, faces, _ = triangles(facets)
+    lines = ["# bayesgloss.geometry.write_obj"]
+    lines += ["v {:.17g} {:.17g} {:.17g}".format(*v) for v in vertices]
+    lines += ["f {} {} {}".format(*(f + 1)) for f in faces]
+    Path(path).write_text("\n".join(lines) + "\n")
 
 
 def camera_position(

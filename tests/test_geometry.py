@@ -50,3 +50,38 @@ def test_bad_tessellation():
         geometry.tessellated_hemisphere(1.0, 3, 2)
     with pytest.raises(ValueError, match="-1"):
         geometry.tessellated_hemisphere(-1.0)
+
+
+def test_l_building_is_a_closed_non_convex_solid_with_the_stated_areas(tmp_path):
+    import trimesh
+
+    b = geometry.l_building(3.0, 1.0, (1.0, 1.5))
+    assert len(b) == 8
+    np.testing.assert_allclose(np.linalg.norm(b.normal, axis=1), 1.0, atol=1e-12)
+    vertices, faces, owner = geometry.triangles(b)
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    # every fan triangle faces its facet's way: the fans tile the L-shaped walls
+    np.testing.assert_allclose(
+        cross / np.linalg.norm(cross, axis=1, keepdims=True), b.normal[owner - 1], atol=1e-12
+    )
+    # areas by hand: roofs 3 x 1 and 2 x 1; east wall 3 x 1.5, its south 1 x 1.5; its
+    # west wall 2 x 1.5 + 1 x 0.5; the inner wall 2 x 1, the north's west 1 x 1; the
+    # north wall 2 x 1 + 1 x 1.5
+    area = np.bincount(owner, 0.5 * np.linalg.norm(cross, axis=1))[1:]
+    np.testing.assert_allclose(area, [3, 2, 4.5, 1.5, 3.5, 2, 1, 3.5], rtol=1e-12)
+    # with the ground (the footprint) it closes: the divergence theorem gives the
+    # volume 3 x 1 x 1.5 + 2 x 1 x 1 = 6.5 m^3 (the footprint adds nothing: z = 0)
+    volume = np.sum(np.einsum("tk,tk->t", tri[:, 0], cross)) / 6
+    assert volume == pytest.approx(6.5, rel=1e-12)
+    # not convex: the inner corner's walls face the L's other wing
+    inner = b.center[5]  # the north wing's south-facing inner wall
+    assert np.any((vertices - inner) @ b.normal[5] > 0.5)
+    geometry.write_obj(b, tmp_path / "l.obj")
+    mesh = trimesh.load_mesh(tmp_path / "l.obj", process=False)
+    assert mesh.area == pytest.approx(21.0, rel=1e-12) and len(mesh.faces) == len(faces)
+    # turned and moved: the same solid
+    t = geometry.l_building(azimuth=90.0, center=(1.0, 2.0, 0.0))
+    np.testing.assert_allclose(t.normal[2], [0, -1, 0], atol=1e-12)  # east wall faces south
+    with pytest.raises(ValueError, match="wing_width < wing_length"):
+        geometry.l_building(1.0, 2.0)
