@@ -161,7 +161,9 @@ def undistort(
     -------
     ndarray (..., 2)
         Undistorted normalised coordinates; NaN where Newton's method did not
-        reach ``tol`` (points beyond where the model is invertible) [-].
+        reach ``tol``, or reached a root past the model's fold (radial factor
+        <= 0 or Jacobian determinant <= 0): points beyond where the model is
+        invertible [-].
     """
     target = np.asarray(xy, dtype=float)
     k1, k2, p1, p2, k3 = _coefficients(distortion)
@@ -184,6 +186,17 @@ def undistort(
             x, y = x - (d * ex - b * ey) / det, y - (a * ey - b * ex) / det
     residual = np.hypot(*np.moveaxis(distort(np.stack([x, y], -1), distortion) - target, -1, 0))
     bad = ~(residual < max(tol, 1e-9))
+    # a root past the fold of the lens model is not the ray: there the radial
+    # factor is <= 0 (the point mapped through the centre) or the map's Jacobian
+    # is not positive (it turns back on itself)
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    slope = k1 + r2 * (2 * k2 + 3 * k3 * r2)
+    a = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
+    b = 2 * x * y * slope + 2 * p1 * x + 2 * p2 * y
+    d = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
+    with np.errstate(invalid="ignore"):
+        bad |= ~((radial > 0) & (a * d - b * b > 0))
     x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
     return np.stack([x, y], axis=-1)
 

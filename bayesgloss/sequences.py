@@ -12,8 +12,11 @@ ambient settings. :func:`render_bundles` renders any number of them:
   hash being that of its configuration, so a finished bundle is never
   rendered again and an interrupted run resumes where it stopped.
 
-Images are traced with ``rtrace`` on bayesgloss's own pinhole camera rays, so
-the image and the facet label pass use exactly the same rays. A pixel is
+Images are traced with ``rtrace`` on bayesgloss's own pinhole camera rays
+(through OpenCV's lens distortion where the config gives one:
+:func:`opencv_camera`, each pixel's points undistorted by
+:func:`bayesgloss.camera_model.camera_rays`), so the image and the facet
+label pass use exactly the same rays. A pixel is
 labelled with a facet only when its centre and its four corners all hit that
 facet (wholly inside); the other pixels are background (0).
 
@@ -83,6 +86,7 @@ __all__ = [
     "paper_configs",
     "render_bundles",
     "camera_rays",
+    "opencv_camera",
     "label_image",
     "camera_response",
     "auto_exposure",
@@ -144,7 +148,7 @@ SKIES = (
     "perez",
     *(f"cie-{t}" for t in range(1, 16)),
 )
-SHAPES = ("hemisphere", "box", "gem")
+SHAPES = ("hemisphere", "box", "gem", "mesh")
 #: Integer pixel encodings and their default bit depth.
 _ENCODING_BITS = {"linear": 16, "srgb": 8, "gamma": 16}
 #: "auto" exposure: the gain is at most this many times the reference gain [-].
@@ -179,7 +183,13 @@ _LATER_DEFAULTS = {
     "bit_depth": None,
     "sensor_noise": 0.0,
     "white_scale": 1.0,
+    "mesh_file": None,
+    "mesh_facet_angle": 10.0,
+    "distortion": None,
 }
+#: Later fields that :meth:`SequenceConfig.to_dict` leaves out at their default,
+#: so that the configs (and bundle truths) written before they existed compare equal.
+_OMITTED_AT_DEFAULT = ("mesh_file", "mesh_facet_angle", "distortion")
 #: Fields that change only what is done to the rendered frames, not the scene.
 _CAMERA_FIELDS = (
     "view",
@@ -192,6 +202,7 @@ _CAMERA_FIELDS = (
     "bit_depth",
     "sensor_noise",
     "white_scale",
+    "distortion",
 )
 
 
@@ -206,9 +217,17 @@ class SequenceConfig:
     "box": ``box_size`` (x, y, z) m, standing on the ground, turned by
     ``box_azimuth`` deg; "gem": :func:`bayesgloss.geometry.gem` of girdle
     radius ``radius`` m standing on ``gem_stand`` ("culet" or "table"),
-    turned by ``gem_azimuth`` deg). Camera: ``view`` (a paper view name or
+    turned by ``gem_azimuth`` deg; "mesh": the triangle mesh of the OBJ or PLY
+    ``mesh_file`` in the world frame, e.g. a non-convex
+    :func:`bayesgloss.geometry.l_building` written by
+    :func:`bayesgloss.geometry.write_obj`, its facets the near-planar regions
+    within ``mesh_facet_angle`` deg (:func:`bayesgloss.capture.mesh_facets`),
+    the file copied into the bundle as its ``object_mesh``; hashed by content).
+    Camera: ``view`` (a paper view name or
     bearing in degrees), ``camera_distance`` and ``camera_height`` (m),
-    square image of ``image_size`` pixels framing the object. Material:
+    square image of ``image_size`` pixels framing the object, through a lens
+    of OpenCV ``distortion`` (k1, k2, p1, p2[, k3]) where given
+    (:func:`opencv_camera`). Material:
     Radiance ``material`` ("plastic" or "metal"), ``colour`` (grey float or
     RGB triple, each in [0, 1]), ``specularity``, ``roughness``.
     Sky: ``sky`` (one of :data:`SKIES`), gensky's ``turbidity``, the clear
@@ -266,6 +285,9 @@ class SequenceConfig:
     sensor_noise: float = 0.0
     white_scale: float = 1.0
     category: str | None = None
+    mesh_file: str | None = None
+    mesh_facet_angle: float = 10.0
+    distortion: tuple | None = None
 
     def __post_init__(self):
         problems = self._input_problems()
@@ -288,6 +310,7 @@ class SequenceConfig:
             problems.append(f"colour {self.colour} not a float or RGB triple in [0, 1]")
         if not 8 <= self.image_size <= 4096:
             problems.append(f"image_size {self.image_size} outside [8, 4096]")
+        problems += self._mesh_problems()
         if self.gem_stand not in ("culet", "table"):
             problems.append(f"gem_stand {self.gem_stand!r} not one of culet, table")
         problems += self._frame_problems() + self._camera_problems()
@@ -351,6 +374,27 @@ class SequenceConfig:
                 problems.append(f"ambient option {items[-1]!r} has no value")
         return problems
 
+    def _mesh_problems(self) -> list[str]:
+        """Shape "mesh" needs a mesh file that exists; a distortion is 4 or 5 numbers."""
+        problems = []
+        if (self.shape == "mesh") != (self.mesh_file is not None):
+            problems.append(f"mesh_file goes with shape 'mesh' (shape {self.shape!r}, "
+                            f"mesh_file {self.mesh_file!r})")  # fmt: skip
+        elif self.mesh_file is not None and Path(self.mesh_file).suffix.lower() not in (
+            ".obj",
+            ".ply",
+        ):
+            problems.append(f"mesh_file {self.mesh_file!r} is not an OBJ or PLY file")
+        elif self.mesh_file is not None and not Path(self.mesh_file).is_file():
+            problems.append(f"mesh_file {self.mesh_file!r}: no such file")
+        if not 0 < self.mesh_facet_angle < 90:
+            problems.append(f"mesh_facet_angle {self.mesh_facet_angle} outside (0, 90) deg")
+        if self.distortion is not None:
+            d = np.asarray(self.distortion, dtype=float)
+            if d.shape not in ((4,), (5,)) or not np.all(np.isfinite(d)):
+                problems.append(f"distortion {self.distortion} is not k1, k2, p1, p2[, k3]")
+        return problems
+
     def _frame_problems(self) -> list[str]:
         n = self.n_frames
         problems = []
@@ -408,6 +452,7 @@ class SequenceConfig:
                 f"valid: {', '.join(sorted(known))}"
             )
         tuples = {"solar_hours", "times", "box_size", "ambient", "dni", "dhi", "colour", "exposure"}
+        tuples.add("distortion")
         clean = {
             k: (tuple(v) if k in tuples and isinstance(v, list | tuple) else v)
             for k, v in values.items()
@@ -415,16 +460,23 @@ class SequenceConfig:
         return cls(**clean)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields as a JSON-like dict; :data:`_OMITTED_AT_DEFAULT` only where set."""
+        d = dataclasses.asdict(self)
+        for k in _OMITTED_AT_DEFAULT:
+            if d[k] == _LATER_DEFAULTS[k]:
+                d.pop(k)
+        return d
 
     def _hashed(self) -> dict:
-        """to_dict() without the name, the category and later fields at their default."""
-        d = self.to_dict()
+        """The fields without the name, the category and later fields at their default."""
+        d = dataclasses.asdict(self)
         d.pop("name")
         d.pop("category")
         for k, default in _LATER_DEFAULTS.items():
             if d[k] == default:
                 d.pop(k)
+        if "mesh_file" in d:  # the mesh's content, wherever the file lies
+            d["mesh_file"] = hashlib.sha256(Path(self.mesh_file).read_bytes()).hexdigest()
         return d
 
     def key(self) -> str:
@@ -443,11 +495,45 @@ class SequenceConfig:
     # -- derived scene quantities ------------------------------------------
 
     def facets(self) -> geometry.Facets:
+        """The object's facets; for shape "mesh" the near-planar regions of
+        ``mesh_file`` within ``mesh_facet_angle`` (:func:`bayesgloss.capture.mesh_facets`,
+        ids = region + 1), without polygons (its triangles: :meth:`object_triangles`)."""
+        if self.shape == "mesh":
+            region, normal, center, _ = self._mesh_regions()
+            return geometry.Facets(np.arange(1, len(normal) + 1), normal, center)
         if self.shape == "hemisphere":
             return geometry.tessellated_hemisphere(self.radius, self.n_rings, self.n_segments)
         if self.shape == "gem":
             return geometry.gem(self.radius, stand=self.gem_stand, azimuth=self.gem_azimuth)
         return geometry.box(self.box_size, self.box_azimuth)
+
+    def _mesh_regions(self):
+        from .capture import load_mesh, mesh_facets
+
+        mesh, group = load_mesh(self.mesh_file)
+        region, normal, center, area = mesh_facets(mesh, group, self.mesh_facet_angle)
+        return region, normal, center, np.asarray(mesh.triangles, dtype=float)
+
+    def object_triangles(self, facets: geometry.Facets | None = None):
+        """The object's surface as polygons and the facet id of each.
+
+        Parameters
+        ----------
+        facets : Facets, optional
+            :meth:`facets`, when already made.
+
+        Returns
+        -------
+        polygons : list of ndarray (V, 3)
+            The facets' polygons, or for shape "mesh" the mesh's triangles [m].
+        ids : ndarray of int
+            The facet of each polygon [-].
+        """
+        if self.shape == "mesh":
+            region, _, _, tris = self._mesh_regions()
+            return list(tris), region + 1
+        facets = self.facets() if facets is None else facets
+        return list(facets.polygons), np.asarray(facets.ids)
 
     def camera_position(self) -> np.ndarray:
         return geometry.camera_position(self.view, self.camera_distance, self.camera_height)
@@ -566,7 +652,7 @@ def paper_configs(image_size: int = 128, **overrides) -> list[SequenceConfig]:
 
 def _camera_frame(config: SequenceConfig, facets: geometry.Facets):
     """Camera position, look direction, right and up vectors, tan of half the FOV."""
-    verts = np.concatenate(facets.polygons)
+    verts = np.concatenate(config.object_triangles(facets)[0])
     lo, hi = verts.min(0), verts.max(0)
     target = 0.5 * (lo + hi)
     bound = 0.5 * np.linalg.norm(hi - lo)  # bounding-sphere radius about the centre
@@ -581,12 +667,58 @@ def _camera_frame(config: SequenceConfig, facets: geometry.Facets):
     return cam, fwd, right, up, tan_half
 
 
+def opencv_camera(config: SequenceConfig, facets: geometry.Facets | None = None):
+    """The configured camera as OpenCV's model (:class:`bayesgloss.camera_model.Camera`).
+
+    The renderer's pinhole framing the object (square, ``image_size``
+    pixels): f = n / (2 tan(half field of view)), the principal point at the
+    image's centre ((n - 1) / 2 in OpenCV's pixel coordinates), R's rows the
+    image's right, down and forward axes; with ``distortion`` (k1, k2, p1,
+    p2[, k3]) as its lens distortion. What ``bundle make``'s camera file
+    holds for frames rendered with this configuration.
+    """
+    from .camera_model import Camera
+
+    facets = config.facets() if facets is None else facets
+    cam, fwd, right, up, tan_half = _camera_frame(config, facets)
+    n = config.image_size
+    f = n / (2 * tan_half)
+    distortion = np.zeros(5)
+    if config.distortion is not None:
+        distortion[: len(config.distortion)] = config.distortion
+    rotation = np.stack([right, -up, fwd])
+    c = (n - 1) / 2
+    return Camera(n, n, f, f, c, c, distortion, rotation, np.asarray(cam, dtype=float))
+
+
 def camera_rays(config: SequenceConfig, facets: geometry.Facets, corners: bool = False):
     """Pinhole rays through pixel centres (or the pixel grid's corners).
 
     Returns origins and unit directions, shape (H*W, 3) with rows top to
-    bottom, or ((H+1)*(W+1), 3) for corners.
+    bottom, or ((H+1)*(W+1), 3) for corners. With ``distortion`` the rays
+    are those of :func:`opencv_camera` through its lens
+    (:func:`bayesgloss.camera_model.camera_rays`: each pixel point
+    undistorted), so the frames are what that distorted camera sees.
+
+    Raises
+    ------
+    ValueError
+        A distortion that cannot be inverted at some pixel of the image.
     """
+    if config.distortion is not None:
+        from . import camera_model
+
+        camera = opencv_camera(config, facets)
+        n = config.image_size
+        grid = np.arange(n + 1) - 0.5 if corners else np.arange(n, dtype=float)
+        u, v = np.meshgrid(grid, grid)
+        d = camera_model.camera_rays(camera, u, v).reshape(-1, 3)
+        if not np.all(np.isfinite(d)):
+            raise ValueError(
+                f"sequence config {config.name!r}: distortion {config.distortion} cannot be "
+                "inverted at some pixels of the image (too strong for the field of view)"
+            )
+        return np.broadcast_to(camera.position, d.shape), d
     cam, fwd, right, up, tan_half = _camera_frame(config, facets)
     n = config.image_size
     grid = np.arange(n + 1) if corners else np.arange(n) + 0.5
@@ -600,10 +732,14 @@ def camera_rays(config: SequenceConfig, facets: geometry.Facets, corners: bool =
 def label_image(config: SequenceConfig, facets: geometry.Facets) -> np.ndarray:
     """Facet label image (H, W): facet id where the pixel lies wholly inside it, else 0."""
     scene = "".join(radiance.material(f"f{i}", "plastic", 0.5, 0.0, 0.0) for i in facets.ids)
-    scene += "".join(
-        radiance.polygons([p], f"f{i}", prefix=f"poly{i}_")
-        for i, p in zip(facets.ids, facets.polygons, strict=True)
-    )
+    polygons, owner = config.object_triangles(facets)
+    if config.shape == "mesh":  # a facet of many triangles: one name a triangle
+        scene += radiance.polygons(polygons, [f"f{i}" for i in owner], prefix="tri")
+    else:
+        scene += "".join(
+            radiance.polygons([p], f"f{i}", prefix=f"poly{i}_")
+            for i, p in zip(owner, polygons, strict=True)
+        )
     n = config.image_size
     oc, dc = camera_rays(config, facets, corners=False)
     ok, dk = camera_rays(config, facets, corners=True)
@@ -713,7 +849,7 @@ def _object_text(config: SequenceConfig, facets: geometry.Facets) -> str:
     disc = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros_like(a)])
     return (
         mat
-        + radiance.polygons(facets.polygons, "object_material")
+        + radiance.polygons(config.object_triangles(facets)[0], "object_material")
         + radiance.material("ground_material", "plastic", config.ground_reflectance, 0, 0)
         + radiance.polygons([disc], "ground_material", prefix="ground")
     )
@@ -852,6 +988,7 @@ def _write_group(plan, cache_dir: Path, bundle_io) -> None:
             ground_reflectance=config.ground_reflectance,
             truth=truth,
             frame_format=frame_format,
+            object_mesh=config.mesh_file,  # None but for shape "mesh"
             overwrite=True,
         )
         if truth["exposure_written"]:  # pixel = exposure x radiance (the spec's frames[].exposure)

@@ -776,3 +776,16 @@ def test_photos_as_files_and_a_turned_photo(tmp_path, capsys):
     assert _make(mesh, camera, tmp_path / "empty", tmp_path / "none") == 2
     err = capsys.readouterr().err
     assert f"photos '{tmp_path / 'empty'}'" in err and "holds no JPEG, PNG or TIFF" in err
+
+
+def test_undistort_refuses_a_root_past_the_lens_models_fold():
+    # k1 = -3: r (1 - 3 r^2) rises to 0.192 at r = 1/3, then falls through 0 at
+    # r = 0.577 to -0.35 at r = 0.75: a distorted radius of 0.3 has no physical
+    # undistorted point, but (-x, -y) at r ~ 0.72 solves the equations (the point
+    # mapped through the centre); it must be NaN, not that backward ray
+    k = [-3.0, 0.0, 0.0, 0.0, 0.0]
+    far = camera_model.undistort([[0.3, 0.0], [0.0, -0.35], [0.1, 0.05]], k)
+    assert np.all(np.isnan(far[:2]))
+    np.testing.assert_allclose(camera_model.distort(far[2], k), [0.1, 0.05], atol=1e-12)
+    x = np.array([-0.72, 0.0])  # the spurious root exists
+    assert np.linalg.norm(camera_model.distort(x, k) - [0.72 * (3 * 0.72**2 - 1), 0]) < 1e-12

@@ -517,3 +517,83 @@ def test_render_configs_reject_bad_names_options_and_forms(values, problem):
     with pytest.raises(ValueError, match=problem):
         sequences.SequenceConfig.from_dict({"name": "ok", **values})
     sequences.SequenceConfig.from_dict({"name": "ok-1.b_2"})  # a plain name passes
+
+
+def test_mesh_shape_and_distortion_leave_older_hashes_and_follow_the_mesh(tmp_path):
+    # keys measured on the code before shape "mesh" and distortion existed (same
+    # package version): a paper config, the capture test's box, a CIE gem with noise
+    before = {
+        sequences.paper_configs()[0]: ("c105ee53ba89", "83d66997c726"),
+        SequenceConfig(
+            shape="box", box_size=(1.2, 0.8, 1.0), box_azimuth=20.0, pixel_encoding="srgb",
+            exposure="auto", exposure_jitter=0.3, image_size=80,
+            solar_hours=(7.0, 10.0, 12.0, 14.5, 17.0), specularity=0.5, view="SW",
+        ): ("249b0da10a2d", "2b76caf5a57f"),
+        SequenceConfig(shape="gem", sky="cie-12", sensor_noise=0.01): (
+            "8e279271a17c", "165f6b3df48b"
+        ),
+    }  # fmt: skip
+    from bayesgloss import __version__, geometry
+
+    for config, (key, scene) in before.items():
+        assert config.scene_key() == scene
+        if __version__ == "0.1.0":  # key() hashes the package version too
+            assert config.key() == key
+    # a mesh's key follows its content, not its path; distortion is a camera field
+    building = geometry.l_building()
+    geometry.write_obj(building, tmp_path / "a.obj")
+    geometry.write_obj(building, tmp_path / "b.obj")
+    a = SequenceConfig(shape="mesh", mesh_file=str(tmp_path / "a.obj"))
+    b = SequenceConfig(shape="mesh", mesh_file=str(tmp_path / "b.obj"))
+    assert a.key() == b.key() and a.key() != SequenceConfig().key()
+    bent = dataclasses.replace(a, distortion=(-0.2, 0.0, 0.0, 0.0))
+    assert bent.scene_key() == a.scene_key() and bent.key() != a.key()
+    geometry.write_obj(geometry.l_building(heights=(1.0, 2.0)), tmp_path / "b.obj")
+    assert b.key() != a.key()
+    # the mesh's facets are the building's polygons (one region each)
+    facets = a.facets()
+    near = np.argmin(np.linalg.norm(facets.center[:, None] - building.center[None], axis=-1), 1)
+    np.testing.assert_allclose(facets.center, building.center[near], atol=1e-12)
+    np.testing.assert_allclose(facets.normal, building.normal[near], atol=1e-12)
+    polygons, owner = a.object_triangles()
+    assert len(polygons) == 20 and set(owner) == set(facets.ids)
+    for bad, match in [
+        (dict(shape="mesh"), "mesh_file goes with shape 'mesh'"),
+        (dict(mesh_file=str(tmp_path / "a.obj")), "mesh_file goes with shape 'mesh'"),
+        (dict(shape="mesh", mesh_file=str(tmp_path / "none.obj")), "no such file"),
+        (dict(shape="mesh", mesh_file=str(tmp_path / "a.stl")), "not an OBJ or PLY"),
+        (dict(distortion=(0.1, 0.2)), "distortion"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            SequenceConfig(**bad)
+
+
+def test_distorted_camera_rays_image_at_their_pixels():
+    # the renderer's rays with lens distortion go back, through OpenCV's forward
+    # model (camera_model.project: distort), to the pixel centres and corners they
+    # were cast through
+    from bayesgloss import camera_model
+
+    cfg = _small(view="SW", image_size=24, distortion=(-0.4, 0.15, 0.002, -0.001, 0.0))
+    facets = cfg.facets()
+    cam = sequences.opencv_camera(cfg, facets)
+    for corners, grid in ((False, np.arange(24.0)), (True, np.arange(25.0) - 0.5)):
+        origin, d = sequences.camera_rays(cfg, facets, corners=corners)
+        uv, front = camera_model.project(cam, origin + 5 * d)
+        u, v = np.meshgrid(grid, grid)
+        assert np.all(front)
+        np.testing.assert_allclose(uv, np.column_stack([u.ravel(), v.ravel()]), atol=1e-8)
+    # without distortion, the OpenCV camera is the renderer's own pinhole
+    plain = dataclasses.replace(cfg, distortion=None)
+    origin, d = sequences.camera_rays(plain, facets)
+    uv, _ = camera_model.project(sequences.opencv_camera(plain, facets), origin + 5 * d)
+    u, v = np.meshgrid(np.arange(24.0), np.arange(24.0))
+    np.testing.assert_allclose(uv, np.column_stack([u.ravel(), v.ravel()]), atol=1e-9)
+    # barrel distortion: the corner pixel's ray is further out than the pinhole's
+    assert np.arccos(d[0] @ cam.rotation[2]) < np.arccos(
+        sequences.camera_rays(cfg, facets)[1][0] @ cam.rotation[2]
+    )
+    with pytest.raises(ValueError, match="cannot be inverted"):
+        sequences.camera_rays(
+            dataclasses.replace(cfg, distortion=(-3.0, 0, 0, 0, 0)), facets, corners=True
+        )
