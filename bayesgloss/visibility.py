@@ -102,12 +102,15 @@ __all__ = [
     "SHADOWED_MAX",
     "SUNLIT_MIN",
     "Visibility",
+    "N_SUB",
+    "bundle_occlusion",
     "bundle_visibility",
     "classify",
     "facet_faces",
     "facet_points",
     "facet_visibility",
     "load_object_mesh",
+    "occlusion",
     "partly_shadowed",
     "shadow_flags",
     "sky_view",
@@ -595,6 +598,334 @@ def bundle_visibility(bundle, **kwargs) -> Visibility | None:
         )
     except ValueError as err:
         raise BundleError(bundle.path, "object_mesh", str(err)) from None
+
+
+# ---------------------------------------------------------------------------
+# the forward model's view: a visibility map over its quadrature
+# ---------------------------------------------------------------------------
+
+#: Points of a facet each quadrature direction's rays leave from.
+N_SUB = 8
+#: Rays from each point a facet's ray meets (mesh or ground) to find how much
+#: of that point's own sky and ground the mesh hides.
+N_VIEW = 2
+#: Cells cast: those whose centre lies above the facet's plane or within this
+#: (sine of 3.4 deg, more than half a 3 deg cell) below it, where a lobe's or
+#: the cosine's directions still reach [-].
+_BELOW_PLANE = 0.06
+#: Rays along a cell centre less than this above the facet's plane are tilted
+#: up to it, so they do not meet the facet's own faces [-].
+_MIN_ELEVATION = 0.02
+
+
+def _first_hits(mesh, origins, directions):
+    """First face each ray meets: (hit (N,) bool, location (N, 3), face (N,) int)."""
+    origins = np.ascontiguousarray(origins.reshape(-1, 3))
+    directions = np.ascontiguousarray(directions.reshape(-1, 3))
+    hit = np.zeros(len(origins), bool)
+    loc = np.zeros((len(origins), 3))
+    face = np.full(len(origins), -1)
+    for s in range(0, len(origins), _RAY_CHUNK):
+        o, d = origins[s : s + _RAY_CHUNK], directions[s : s + _RAY_CHUNK]
+        where, ray, tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
+        hit[s + ray] = True
+        loc[s + ray] = where
+        face[s + ray] = tri
+    return hit, loc, face
+
+
+def _sees_sun(mesh, points, normals, sun, wanted) -> np.ndarray:
+    """Whether points (M, 3), lifted along normals (M, 3), see the sun (T, 3), (M, T) bool.
+
+    Only entries ``wanted`` (M, T) are cast, a frame at a time; the others
+    are False.
+    """
+    out = np.zeros(wanted.shape, bool)
+    lifted = _lift(mesh, points, normals)
+    for t, s in enumerate(sun):
+        m = np.flatnonzero(wanted[:, t])
+        if len(m):
+            out[m, t] = ~_occluded(mesh, lifted[m], np.broadcast_to(s, (len(m), 3)))
+    return out
+
+
+#: Ground cells a side of the grid on which :func:`_ground_sees_sun` finds the
+#: mesh's shadow in each frame.
+GROUND_GRID = 256
+
+
+def _ground_sees_sun(mesh, points, sun, n_grid: int = GROUND_GRID) -> np.ndarray:
+    """Whether ground points (M, 3) (z = 0) see the sun (T, 3), (M, T) bool.
+
+    In each frame with the sun up, rays leave the centres of an ``n_grid`` x
+    ``n_grid`` grid over the box that the mesh's bounding box casts on the
+    ground; a point takes its grid cell's answer, and outside the box it is
+    lit. The shadow's edge is so placed to within a cell (the box's side /
+    ``n_grid``). False with the sun down.
+    """
+    corners = np.array(list(np.ndindex(2, 2, 2)), float)
+    lo, hi = np.asarray(mesh.bounds, dtype=float)
+    box = lo + corners * (hi - lo)  # (8, 3)
+    out = np.zeros((len(points), len(sun)), bool)
+    for t, s in enumerate(sun):
+        if s[2] <= 0:
+            continue
+        cast = box[:, :2] - (box[:, 2:3] / s[2]) * s[:2]  # the corners cast on z = 0
+        glo = np.minimum(cast.min(0), box[:, :2].min(0))
+        ghi = np.maximum(cast.max(0), box[:, :2].max(0))
+        step = (ghi - glo) / n_grid
+        ij = np.floor((points[:, :2] - glo) / np.where(step > 0, step, 1.0)).astype(np.int64)
+        inside = np.all((ij >= 0) & (ij < n_grid), axis=1)
+        out[~inside, t] = True
+        if not np.any(inside):
+            continue
+        x = glo[0] + (np.arange(n_grid) + 0.5) * step[0]
+        y = glo[1] + (np.arange(n_grid) + 0.5) * step[1]
+        gx, gy = np.meshgrid(x, y, indexing="ij")
+        cells = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], -1)
+        up = np.broadcast_to([0.0, 0.0, 1.0], cells.shape)
+        lit = ~_occluded(mesh, _lift(mesh, cells, up), np.broadcast_to(s, cells.shape))
+        k = ij[inside]
+        out[inside, t] = lit.reshape(n_grid, n_grid)[k[:, 0], k[:, 1]]
+    return out
+
+
+def _open_view(mesh, points, normals, n_rays: int, n_set: int = 64):
+    """Cosine-weighted rays from points (M, 3), lifted along their normals (M, 3):
+    whether each meets no face (M, R) and its direction (M, R, 3). Point i takes
+    directions i R ... i R + R - 1 (mod ``n_set``) of one fixed set."""
+    u = _halton(n_set, 2)
+    r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]  # Malley: uniform disc, lifted
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - u[:, 0])], -1)
+    pick = (np.arange(len(points))[:, None] * n_rays + np.arange(n_rays)) % n_set  # (M, R)
+    helper = np.where(np.abs(normals[:, 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    e1 = np.cross(helper, normals)
+    e1 /= np.maximum(np.linalg.norm(e1, axis=-1, keepdims=True), 1e-300)
+    e2 = np.cross(normals, e1)
+    lp = local[pick]  # (M, R, 3)
+    dirs = lp[..., 0:1] * e1[:, None] + lp[..., 1:2] * e2[:, None] + lp[..., 2:3] * normals[:, None]
+    origins = np.broadcast_to(_lift(mesh, points, normals)[:, None], dirs.shape)
+    if not len(points):
+        return np.zeros((0, n_rays), bool), dirs
+    blocked = _occluded(mesh, origins, dirs).reshape(len(points), n_rays)
+    return ~blocked, dirs
+
+
+def _view_rays(rows, n_rows, open_, dirs, resolution):
+    """Secondary rays binned by pair and quadrature cell: (open (P, K), all (P, K)) CSR counts."""
+    from scipy.sparse import csr_matrix
+
+    from .render import quadrature_cell, sphere_quadrature
+
+    n_k = len(sphere_quadrature(resolution)[0])
+    r = np.repeat(rows, open_.shape[1])
+    cell = quadrature_cell(dirs.reshape(-1, 3), resolution)
+    every = csr_matrix((np.ones(len(r)), (r, cell)), shape=(n_rows, n_k))
+    seen = csr_matrix((open_.ravel().astype(float), (r, cell)), shape=(n_rows, n_k))
+    every.sum_duplicates()
+    seen.sum_duplicates()
+    return seen, every
+
+
+def occlusion(
+    mesh,
+    normal,
+    center,
+    sun_direction,
+    group=None,
+    *,
+    resolution: float = 3.0,
+    n_points: int = N_POINTS,
+    n_sub: int = N_SUB,
+    n_view: int = N_VIEW,
+    interreflection: str = "lambert",
+    occluder_reflectance: float | None = None,
+    angle_tolerance: float = ANGLE_TOLERANCE,
+    plane_tolerance: float | None = None,
+    ids=None,
+):
+    """What the mesh hides from each facet, on the forward model's quadrature.
+
+    For :class:`bayesgloss.render.Occlusion` (the forward model's
+    ``occlusion=``): from each of ``n_sub`` of the facet's :data:`N_POINTS`
+    points (a different set for each direction, in turn through all of them)
+    a ray along each direction of ``render.sphere_quadrature(resolution)``
+    that lies above the facet's plane (or within 3.4 deg below it); the open
+    fraction is the share of them that meets no face. Per cell, the first of
+    those rays that meets a face is its representative: the face's normal and
+    whether the point met sees the sun in each frame (one more ray a frame);
+    per downward cell, the first ray that meets none gives the ground point
+    (where it reaches z = 0) whose view of the sun is tested the same way.
+    The sunlit fraction is :func:`sunlit_fraction`'s.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        World frame [m].
+    normal, center : array_like (F, 3)
+        Facets' unit normals and centres [-], [m].
+    sun_direction : array_like (T, 3)
+        Unit vectors toward the sun.
+    group : array_like (M,), optional
+        Each face's group.
+    resolution : float
+        Ring width of the quadrature [deg]; the bases must use the same.
+    n_points, n_sub : int
+        Points per facet; rays per facet and direction.
+    interreflection : {"lambert", "none"}
+        Radiance of blocked directions (:class:`bayesgloss.render.Occlusion`).
+    occluder_reflectance : float, optional
+        Albedo of the mesh's faces for ``"lambert"`` [-]; None: the ground's.
+    angle_tolerance, plane_tolerance, ids
+        As :func:`facet_visibility`.
+
+    Returns
+    -------
+    bayesgloss.render.Occlusion
+    """
+    from . import render
+
+    normal = np.atleast_2d(np.asarray(normal, dtype=float))
+    center = np.atleast_2d(np.asarray(center, dtype=float))
+    sun = np.atleast_2d(np.asarray(sun_direction, dtype=float))
+    face_facet = facet_faces(
+        mesh,
+        normal,
+        center,
+        group,
+        angle_tolerance=angle_tolerance,
+        plane_tolerance=plane_tolerance,
+    )
+    n_f = len(normal)
+    missing = np.bincount(face_facet[face_facet >= 0], minlength=n_f) == 0
+    if np.any(missing):
+        f = int(np.flatnonzero(missing)[0])
+        name = f"facet {f}" if ids is None else f"facet id {int(np.asarray(ids)[f])}"
+        raise ValueError(
+            f"no face of the mesh lies on {name}'s plane within {angle_tolerance:g} deg"
+        )
+    points, point_normals = facet_points(mesh, face_facet, n_f, n_points)
+    lifted = _lift(mesh, points, point_normals)  # (F, P, 3)
+    dirs, _ = render.sphere_quadrature(resolution)
+    n_k, n_p = len(dirs), points.shape[1]
+    cos = normal @ dirs.T  # (F, K)
+    f_idx, k_idx = np.nonzero(cos > -_BELOW_PLANE)
+    # directions at or below the plane: tilted up to a small elevation above it
+    d = dirs[k_idx] + np.maximum(_MIN_ELEVATION - cos[f_idx, k_idx], 0.0)[:, None] * normal[f_idx]
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    which = (k_idx[:, None] * n_sub + np.arange(n_sub)) % n_p  # (C, S)
+    origins = lifted[f_idx[:, None], which]  # (C, S, 3)
+    hit, loc, face = _first_hits(mesh, origins, np.broadcast_to(d[:, None], origins.shape))
+    hit, loc, face = hit.reshape(-1, n_sub), loc.reshape(-1, n_sub, 3), face.reshape(-1, n_sub)
+    open_fraction = np.ones((n_f, n_k))
+    open_fraction[f_idx, k_idx] = 1.0 - hit.mean(1)
+    sun_up = sun[:, 2] > 0
+    # cells with a blocked part: each blocked ray's face, turned toward the
+    # facet, and whether the point it meets sees the sun
+    h = np.flatnonzero(hit.any(1))
+    hc, hs = np.nonzero(hit[h])  # (blocked ray) -> (cell among h, sub-ray)
+    h_normal = np.asarray(mesh.face_normals, dtype=float)[face[h][hc, hs]]
+    h_normal *= np.where(np.sum(h_normal * d[h][hc], -1) > 0, -1.0, 1.0)[:, None]
+    cos_sun = np.maximum(h_normal @ sun.T, 0.0) * sun_up  # (R, T)
+    lit = _sees_sun(mesh, loc[h][hc, hs], h_normal, sun, cos_sun > 0)
+    n_blocked = hit[h].sum(1)
+    h_sun = np.zeros((len(h), len(sun)))
+    np.add.at(h_sun, hc, cos_sun * lit)
+    h_sun /= n_blocked[:, None]
+    h_open, h_dirs = _open_view(mesh, loc[h][hc, hs], h_normal, n_view)
+    h_rays = _view_rays(hc, len(h), h_open, h_dirs, resolution)
+    h_view = np.zeros(len(h))
+    np.add.at(h_view, hc, h_open.mean(1))
+    h_view /= n_blocked
+    mean_normal = np.zeros((len(h), 3))
+    np.add.at(mean_normal, hc, h_normal)
+    mean_normal /= np.maximum(np.linalg.norm(mean_normal, axis=-1, keepdims=True), 1e-12)
+    # downward cells with an open part: the ground points its open rays reach
+    g = np.flatnonzero((d[:, 2] < 0) & ~hit.all(1))
+    gc, gs = np.nonzero(~hit[g])
+    start = origins[g][gc, gs]
+    g_loc = start - (start[:, 2:3] / d[g][gc, 2:3]) * d[g][gc]
+    g_loc[:, 2] = 0.0
+    up = np.broadcast_to([0.0, 0.0, 1.0], g_loc.shape)
+    g_lit = _ground_sees_sun(mesh, g_loc, sun)
+    g_sun = np.zeros((len(g), len(sun)))
+    np.add.at(g_sun, gc, g_lit.astype(float))
+    g_open, g_dirs = _open_view(mesh, g_loc, np.ascontiguousarray(up), n_view)
+    g_rays = _view_rays(gc, len(g), g_open, g_dirs, resolution)
+    g_view = np.zeros(len(g))
+    np.add.at(g_view, gc, g_open.mean(1))
+    g_sun /= (~hit[g]).sum(1)[:, None]
+    g_view /= (~hit[g]).sum(1)
+    return render.Occlusion(
+        open_fraction=open_fraction,
+        sunlit_fraction=sunlit_fraction(mesh, points, point_normals, normal, sun),
+        resolution=float(resolution),
+        ground_facet=f_idx[g],
+        ground_cell=k_idx[g],
+        ground_lit=g_sun,
+        ground_view=g_view,
+        ground_rays=g_rays,
+        hit_facet=f_idx[h],
+        hit_cell=k_idx[h],
+        hit_normal=mean_normal,
+        hit_sun=h_sun,
+        hit_view=h_view,
+        hit_rays=h_rays,
+        interreflection=interreflection,
+        occluder_reflectance=occluder_reflectance,
+    )
+
+
+#: :func:`bundle_occlusion`'s results, by the mesh file's digest, the facets,
+#: the suns and the options; the oldest go first beyond :data:`_CACHE_SIZE`.
+_CACHE: dict = {}
+_CACHE_SIZE = 4
+
+
+def bundle_occlusion(bundle, **kwargs):
+    """:func:`occlusion` of a bundle's facets and frames, or None without a mesh.
+
+    Computed once per bundle content and kept in memory (by a digest of the
+    mesh file, the facets' normals and centres, the sun directions and the
+    options); never written to disk. Raises :class:`BundleError` naming
+    ``object_mesh`` as :func:`bundle_visibility` does.
+    """
+    import hashlib
+
+    name = bundle.manifest.get("object_mesh")
+    if not name:
+        return None
+    path = Path(bundle.path) / name
+    facets = bundle.facets
+    digest = hashlib.sha256()
+    try:
+        digest.update(path.read_bytes())
+    except OSError:
+        load_object_mesh(bundle)  # the one-line error for a missing mesh
+        raise
+    for a in (facets.normal, facets.center, bundle.sun_direction):
+        digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    digest.update(repr(sorted(kwargs.items())).encode())
+    key = digest.hexdigest()
+    if key in _CACHE:
+        return _CACHE[key]
+    mesh, group = load_object_mesh(bundle)
+    try:
+        out = occlusion(
+            mesh,
+            facets.normal,
+            facets.center,
+            bundle.sun_direction,
+            group,
+            ids=facets.ids,
+            **kwargs,
+        )
+    except ValueError as err:
+        raise BundleError(bundle.path, "object_mesh", str(err)) from None
+    _CACHE[key] = out
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    return out
 
 
 def shadow_flags(bundle, curves, visibility: Visibility | None = None):
