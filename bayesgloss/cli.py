@@ -247,6 +247,7 @@ def _estimate(args: argparse.Namespace) -> int:
         per_frame=args.per_frame,
         sampler_options={"max_steps": args.max_steps},
         fresnel=args.fresnel,
+        lobe=args.lobe,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -282,6 +283,12 @@ def _print_estimate(name, summary) -> None:
         fam = summary["sky_families"]["families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
         print(f"sky families (stacking weight): {weights}")
+    if "lobe_families" in summary:  # the stacked lobe families (estimate --lobe families)
+        fam = summary["lobe_families"]
+        weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
+        print(f"lobe families (stacking weight): {weights}")
+    elif summary.get("lobe_family", "phong") != "phong":
+        print(f"lobe family: {summary['lobe_family']}")
     if "fresnel_strength" in o:  # the Fresnel raise's unknowns (estimate --fresnel radiance)
         k, a = o["fresnel_strength"], o["normal_albedo"]
         print(
@@ -331,6 +338,7 @@ def _estimate_many(args, progress) -> int:
                 # only where set, so that other runs keep their units' keys
                 **({"per_frame": True} if args.per_frame else {}),
                 **({"fresnel": args.fresnel} if args.fresnel else {}),
+                **({"lobe": args.lobe} if args.lobe else {}),
                 "bundle_content": content,
             },
         )
@@ -489,6 +497,7 @@ def _parser() -> argparse.ArgumentParser:
     from . import sky
     from .fresnel import FRESNEL_MODELS
     from .joint_estimate import DEFAULT_FRESNEL
+    from .lobes import LOBE_FAMILIES
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -586,6 +595,14 @@ def _parser() -> argparse.ArgumentParser:
         "Radiance's Fresnel estimate, with its strength (0: Radiance's rough materials, "
         "1: smooth ones and real surfaces) and the normal-incidence albedo inferred "
         "(bayesgloss.fresnel)",
+    )
+    es.add_argument(
+        "--lobe",
+        default=None,
+        choices=(*LOBE_FAMILIES, "families"),
+        help="the glossy lobe's family (default 'phong'): Radiance's 'ward', a GGX "
+        "microfacet lobe with Smith shadowing 'ggx', or 'families': one fit per family, "
+        "stacked by PSIS-LOO (bayesgloss.lobes, bayesgloss.lobe_families)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

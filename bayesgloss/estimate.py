@@ -22,12 +22,16 @@ that model is fitted four times, under the per-frame mixture of sky
 shapes and under each of gensky's clear, intermediate and overcast skies
 all day, and the object's gamma and n are the fits' mixture with their
 PSIS-LOO stacking weights (:mod:`bayesgloss.sky_families`; the facets'
-and frames' answers are the most-weighted fit's). The summaries below are
+and frames' answers are the most-weighted fit's). ``lobe="families"`` fits
+the glossy lobe of each family of :mod:`bayesgloss.lobes` (Phong, Ward, GGX)
+under the most-weighted sky and stacks them the same way
+(:mod:`bayesgloss.lobe_families`; opt-in). The summaries below are
 kept beside it (a facet population's mu misled on overcast days: the
 facets' posteriors share the frames, and their product read confident
 answers the data did not hold).
 
-With fixed brightness (``per_frame=False``), object-level gloss, beside the
+With fixed brightness (``per_frame=False``; the facets sampled on their own,
+:mod:`bayesgloss.facets_estimate`), object-level gloss, beside the
 paper's average of facets:
 
 - ``population``: a hierarchical model, facet gammas drawn from a Beta
@@ -77,21 +81,22 @@ from pathlib import Path
 import numpy as np
 
 from . import bundle as bundle_io
-from . import diagnostics, render, sampling, sky, sky_families
+from . import diagnostics, lobe_families, sky_families
 from . import likelihood as lk
-from ._thirdparty import arviz
+from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_inference_data
 from .fresnel import check_fresnel_model
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
     DEFAULT_FRESNEL,
+    DEFAULT_LOBE_FAMILY,
     bundle_sky,
     frame_summary,
     joint_fit,
     sky_model_summary,
 )
-from .pool import process_pool
+from .lobes import check_lobe_family
 from .pooling import population_gloss, shared_gloss
 from .results import (
     RESULT_FILES,
@@ -123,31 +128,8 @@ __all__ = [
     "convergence",
 ]
 
-#: Illumination models: every sky model of :func:`bayesgloss.sky.sky_models`.
-ILLUMINATION_MODELS = sky.sky_models()
 #: Usable frames a facet's curve needs at least.
 MIN_FRAMES = 4
-
-
-def bundle_bases(
-    b, illumination: str = "gensky-clear", *, exponents=render.DEFAULT_EXPONENTS, occluder=None
-) -> render.FacetBases:
-    """Forward-model bases of a bundle's facets under an illumination model.
-
-    The sky model sees the bundle's ground reflectance (0.2 if absent) and a
-    ground plane (``"point-sun"``: nothing but the sun).
-    """
-    if illumination not in (*ILLUMINATION_MODELS, "measured"):
-        raise ValueError(
-            f"unknown illumination {illumination!r}; valid: {', '.join(ILLUMINATION_MODELS)}, "
-            "measured"
-        )
-    rho = b.ground_albedo
-    day = bundle_sky(b, illumination, rho)
-    ground = "sky" if illumination == "point-sun" else "plane"
-    return render.facet_bases(
-        b.view_geometry(occluder), day, exponents, ground=ground, ground_reflectance=rho
-    )
 
 
 def bundle_curves(b) -> bundle_io.FacetCurves:
@@ -215,60 +197,6 @@ def convergence(idata, facet_runs=None) -> dict:
     return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail, "converged": ok}
 
 
-def to_inference_data(
-    samples: sampling.PosteriorSamples, data: lk.CurveData, ids, *, times=None, rng=None
-):
-    """ArviZ InferenceData of facet posteriors (chains are independent ensembles)."""
-    az = arviz()
-
-    rng = np.random.default_rng(rng)
-    draws = samples.draws  # (F, E, S, P)
-    f, e, s_, p = draws.shape
-    th = draws.transpose(0, 1, 2, 3).reshape(f, e * s_, p)
-    pointwise = lk.log_likelihood(th, data, pointwise=True)  # (F, E*S, T)
-    pred = lk.simulate(th, data, rng)  # (F, E*S, T)
-    t = data.y.shape[1]
-
-    def chains(x):  # (F, E*S, ...) -> (E, S, F, ...)
-        x = x.reshape(f, e, s_, *x.shape[2:])
-        return np.moveaxis(x, 0, 2)
-
-    post = {
-        "gamma": chains(th[..., 0]),
-        "n": chains(np.exp(th[..., 1])),
-        "s": chains(np.exp(th[..., 2])),
-        "sigma": chains(np.exp(th[..., 3])),
-    }
-    if p == 5:
-        post["g"] = chains(np.exp(th[..., 4]))
-    ll = np.where(data.valid[:, None, :], pointwise, np.nan)
-    coords = {"facet": np.asarray(ids), "frame": np.arange(t)}
-    idata = az.from_dict(
-        posterior=post,
-        log_likelihood={"y": chains(ll)},
-        posterior_predictive={"y": chains(pred)},
-        observed_data={"y": np.where(data.valid, data.y, np.nan)},
-        sample_stats={
-            "tau_gamma": np.broadcast_to(samples.tau[..., 0].T[:, None, :], (e, s_, f)),
-        },
-        coords={"facet": coords["facet"], "frame": coords["frame"]},
-        dims={
-            "gamma": ["facet"],
-            "n": ["facet"],
-            "s": ["facet"],
-            "sigma": ["facet"],
-            "g": ["facet"],
-            "y": ["facet", "frame"],
-            "tau_gamma": ["facet"],
-        },
-    )
-    idata.observed_data["valid"] = (("facet", "frame"), data.valid)
-    idata.observed_data["censored"] = (("facet", "frame"), data.censored)
-    if times is not None:  # UTC, stored without a zone
-        idata.observed_data["time"] = (("frame",), times.tz_convert("UTC").tz_localize(None))
-    return idata
-
-
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
 NOT_IDENTIFIABLE_WIDTH = 0.6
@@ -310,6 +238,7 @@ def estimate_bundle(
     progress=None,
     sampler_options: dict | None = None,
     fresnel: str | None = None,
+    lobe: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -349,6 +278,11 @@ def estimate_bundle(
         The one-material model's Fresnel model (:mod:`bayesgloss.fresnel`;
         per-frame illumination only); default
         :data:`bayesgloss.joint_estimate.DEFAULT_FRESNEL`.
+    lobe : {"phong", "ward", "ggx", "families"}, optional
+        The glossy lobe's family (:mod:`bayesgloss.lobes`; per-frame
+        illumination only), or ``"families"``: one fit per family, stacked
+        by PSIS-LOO (:mod:`bayesgloss.lobe_families`); default
+        :data:`bayesgloss.joint_estimate.DEFAULT_LOBE_FAMILY`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -376,10 +310,41 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    lobe = lobe or DEFAULT_LOBE_FAMILY
+    if lobe != "families":
+        check_lobe_family(lobe)
+    if lobe != DEFAULT_LOBE_FAMILY and not joint:
+        raise ValueError(
+            f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
+            "pixel response); the fixed-brightness estimator has the Phong lobe only"
+        )
     if joint:
         sampler_options["fresnel"] = fresnel
-    families = None
-    if illumination == "families":
+        if lobe != "families":
+            sampler_options["lobe_family"] = lobe
+    families = lobe_info = None
+    if lobe == "families":
+        idata, samples, used, lobe_info = lobe_families.fit_lobe_families(
+            b,
+            curves,
+            y,
+            usable,
+            censored,
+            keep,
+            illumination,
+            seed,
+            sampler_options,
+            progress,
+            jobs,
+        )
+        families = lobe_info.pop("sky_families", None)
+        run = {
+            "seconds": lobe_info.pop("seconds"),
+            "sweeps": samples.n_sweeps,
+            "facet_seconds": samples.facets.seconds,
+            "model": "joint, one fit per lobe family (and sky family), stacked",
+        }
+    elif illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
             b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs
         )
@@ -400,7 +365,7 @@ def estimate_bundle(
             "model": "joint",
         }
     else:
-        idata, samples = _facets_fit(
+        idata, samples = facets_fit(
             b,
             curves,
             y,
@@ -426,40 +391,9 @@ def estimate_bundle(
     out = _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
     if families is not None:
         out.summary["sky_families"] = families
+    if lobe_info is not None:
+        out.summary["lobe_families"] = lobe_info["lobe_families"]
     return out
-
-
-def _facets_fit(
-    b,
-    curves,
-    y,
-    usable,
-    censored,
-    keep,
-    illumination,
-    noise,
-    camera,
-    seed,
-    jobs,
-    progress,
-    options,
-):
-    """The facets sampled independently under the sky model's brightness: (idata, samples)."""
-    if b.exposure is not None:  # frames[].exposure: pixel = exposure x radiance
-        y = y / (b.exposure / np.exp(np.mean(np.log(b.exposure))))
-    bases = bundle_bases(b, illumination)
-    sub = render.FacetBases(bases.diffuse[keep], bases.glossy[keep], bases.exponents)
-    data = lk.curve_data(
-        y[keep], usable[keep], sub, censored=censored[keep], noise=noise, camera=camera
-    )
-    options = dict(seed=seed, progress=progress, **(options or {}))
-    if jobs > 1:
-        with process_pool(jobs) as pool:
-            samples = sampling.sample_posterior(data, pool=pool, **options)
-    else:
-        samples = sampling.sample_posterior(data, **options)
-    idata = to_inference_data(samples, data, curves.ids[keep], times=b.times, rng=seed)
-    return idata, samples
 
 
 def _width(q: dict) -> float:
@@ -562,6 +496,11 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
             summary["object"]["fresnel_strength"] = _quantiles(post["fresnel_strength"].values)
             summary["object"]["normal_albedo"] = _quantiles(post["normal_albedo"].values)
         summary["fresnel"] = post.attrs.get("fresnel", "none")
+        summary["lobe_family"] = post.attrs.get(
+            "lobe_family_most_weight", post.attrs.get("lobe_family", "phong")
+        )
+        if "roughness_object" in post:  # the lobe family's microfacet roughness
+            summary["object"]["roughness"] = _quantiles(post["roughness_object"].values)
         states = post["sun_state_weight"].values.mean(axis=(0, 1))
         summary["sun_state"] = {
             str(k): float(v) for k, v in zip(post["sun_state"].values, states, strict=True)
@@ -579,6 +518,7 @@ def estimate_unit(
     per_frame: bool = False,
     bundle_content: str | None = None,
     fresnel: str | None = None,
+    lobe: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -588,7 +528,7 @@ def estimate_unit(
     bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
-    changed since is an error. ``fresnel``: as :func:`estimate_bundle`'s
+    changed since is an error. ``fresnel`` and ``lobe``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -608,5 +548,6 @@ def estimate_unit(
         jobs=1,
         sampler_options={"max_steps": max_steps},
         fresnel=fresnel,
+        lobe=lobe,
     )
     return result_files(res)

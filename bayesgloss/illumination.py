@@ -75,7 +75,7 @@ from scipy import special
 
 from . import fresnel as fr
 from . import likelihood as lk
-from . import render
+from . import lobes, render
 from .gamma_interval import log_gamma_interval, tail_cuts
 
 __all__ = [
@@ -206,7 +206,7 @@ def _even_mix(sources: int) -> np.ndarray:
 
 
 def illumination_bases(
-    geometry, day, exponents=render.DEFAULT_EXPONENTS, others=(), **kwargs
+    geometry, day, exponents=render.DEFAULT_EXPONENTS, others=(), *, lobe_family="phong", **kwargs
 ) -> IlluminationBases:
     """Forward-model bases of the sun of ``day``, its sky, and other skies'.
 
@@ -220,6 +220,9 @@ def illumination_bases(
     others : DaylightSky or sequence of them
         Further sky models (their suns ignored), each scaled in each frame
         to the first one's diffuse horizontal irradiance; none: one sky model.
+    lobe_family : {"phong", "ward", "ggx"}
+        The glossy lobe's family (:mod:`bayesgloss.lobes`), tabulated on the
+        Phong-equivalent ``exponents``.
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...).
@@ -229,7 +232,11 @@ def illumination_bases(
     if not isinstance(others, (list, tuple)):
         others = (others,)
     sun_only, sky_a = split_sky(day)
-    parts = [render.facet_bases(geometry, d, exponents, **kwargs) for d in (sun_only, sky_a)]
+
+    def bases(d):
+        return lobes.facet_bases(geometry, d, exponents, family=lobe_family, **kwargs)
+
+    parts = [bases(d) for d in (sun_only, sky_a)]
     d_parts, g_parts = [p.diffuse for p in parts], [p.glossy for p in parts]
     if not others:
         d_parts.append(d_parts[1])
@@ -242,7 +249,7 @@ def illumination_bases(
             r = np.log(np.broadcast_to(second.solar_radiance, e_a.shape) / sun_a)
         ratios.append(np.where(np.isfinite(r), r, IlluminationPriors().sun_cloud_mean))
         sky_b = split_sky(second)[1]
-        other = render.facet_bases(geometry, sky_b, exponents, **kwargs)
+        other = bases(sky_b)
         e_b = horizontal_irradiance(sky_b, include_sun=False)
         with np.errstate(invalid="ignore", divide="ignore"):
             factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)

@@ -20,10 +20,12 @@ from ._thirdparty import arviz
 from .fresnel import FRESNEL_COLUMNS
 from .intervals import posterior_quantiles
 from .irradiance import measured_sky
+from .lobes import check_lobe_family, roughness_of_exponent
 
 __all__ = [
     "AUTO_SKIES",
     "DEFAULT_FRESNEL",
+    "DEFAULT_LOBE_FAMILY",
     "JOINT_MAX_SWEEPS",
     "FACETS_GIVEN_FRAMES_STEPS",
     "bundle_sky",
@@ -44,6 +46,9 @@ AUTO_SKIES = ("gensky-clear", "gensky-intermediate", "gensky-overcast")
 #: The one-material model's Fresnel model where none is named
 #: (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
 DEFAULT_FRESNEL = "none"
+
+#: The glossy lobe's family where none is named (:data:`bayesgloss.lobes.LOBE_FAMILIES`).
+DEFAULT_LOBE_FAMILY = "phong"
 
 #: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
 #: run stops earlier once converged; otherwise it is flagged ``not-converged``).
@@ -68,10 +73,13 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
     return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
 
 
-def joint_inputs(b, y, usable, censored, keep, illumination, fresnel="none"):
+def joint_inputs(
+    b, y, usable, censored, keep, illumination, fresnel="none", lobe_family=DEFAULT_LOBE_FAMILY
+):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` and the frames any of them sees with the sun
-    up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`):
+    up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`)
+    and the glossy lobe's family ``lobe_family`` (:data:`bayesgloss.lobes.LOBE_FAMILIES`):
     (data, frames used (T,) of bool, sky model names)."""
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
@@ -81,7 +89,12 @@ def joint_inputs(b, y, usable, censored, keep, illumination, fresnel="none"):
     used = ok.any(axis=0) & b.sun_up
     geometry = b.view_geometry()
     bases = il.illumination_bases(
-        geometry, day, others=others, ground=ground, ground_reflectance=rho
+        geometry,
+        day,
+        others=others,
+        lobe_family=lobe_family,
+        ground=ground,
+        ground_reflectance=rho,
     ).take(keep, used)
     exposure = None
     if b.exposure is not None:
@@ -106,7 +119,8 @@ def joint_fit(
     az = arviz()
     options = dict(options or {})
     fresnel = options.pop("fresnel", DEFAULT_FRESNEL)
-    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination, fresnel)
+    family = check_lobe_family(options.pop("lobe_family", DEFAULT_LOBE_FAMILY))
+    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination, fresnel, family)
     if "max_steps" in options:  # a sweep of the joint sampler is its step
         options.setdefault("max_sweeps", options.pop("max_steps"))
     options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
@@ -133,6 +147,8 @@ def joint_fit(
     }
     if data.log_exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
+    if family != "phong":  # the family's microfacet roughness (bayesgloss.lobes)
+        post["roughness_object"] = roughness_of_exponent(post["n_object"])
     if data.fresnel is not None:  # the Fresnel raise's strength and normal-incidence albedo
         k_col, a_col = FRESNEL_COLUMNS
         post["fresnel_strength"] = th[:, 0, :, k_col]
@@ -166,6 +182,7 @@ def joint_fit(
         dims=dims,
     )
     idata.posterior.attrs["fresnel"] = fresnel
+    idata.posterior.attrs["lobe_family"] = family
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)
     idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
     idata.observed_data["time"] = (

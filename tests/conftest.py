@@ -86,6 +86,7 @@ def make_synthetic_bundle(
     bits=16,
     exposure=None,
     sky_model="gensky-clear",
+    radiance=None,
 ):
     """A small sequence bundle made by the forward model, no Radiance needed.
 
@@ -112,6 +113,9 @@ def make_synthetic_bundle(
     sky_model : str
         The day's sky (:func:`bayesgloss.sky.daylight` name), gensky's clear
         sky by default.
+    radiance : callable, optional
+        (ViewGeometry, DaylightSky) -> noiseless facet radiance (F, T), in
+        place of the plastic's (e.g. another lobe family's forward model).
     """
     from bayesgloss import bundle, geometry, render, scene
 
@@ -121,7 +125,10 @@ def make_synthetic_bundle(
     facing = np.flatnonzero(seq.geometry.cos_view > 0.2)
     facets = seq.facets.subset(facing)
     geom = render.view_geometry(facets, seq.camera_position, occluder=seq.facets)
-    radiance = render.radiance_material_prediction(geom, seq.sky, "plastic", 0.5, specularity)
+    if radiance is None:
+        radiance = render.radiance_material_prediction(geom, seq.sky, "plastic", 0.5, specularity)
+    else:
+        radiance = radiance(geom, seq.sky)
     rng = np.random.default_rng(seed)
     radiance = radiance * (1 + noise * rng.standard_normal(radiance.shape))
     side = int(np.ceil(np.sqrt(len(facets))))
