@@ -47,16 +47,23 @@ from bayesgloss.intervals import reported_interval
 HERE = Path(__file__).parent
 #: The sets: the 48-sequence validation set, and the 24-sequence holdout drawn
 #: after its first run (``configs/validation_holdout.json``).
-SETS = {"validation_set": "validation_radiance", "validation_holdout": "validation_holdout"}
+SETS = {
+    "validation_set": "validation_radiance",
+    "validation_holdout": "validation_holdout",
+    "mitsuba_set": "validation_mitsuba",
+}
 RESULTS = HERE / "results"
-METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel")
+METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel", "lobes")
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
     "fixed": {"per_frame": False},
     "per-frame": {"per_frame": True},
     "families": {"per_frame": True, "illumination": "families"},
     "fresnel": {"per_frame": True, "illumination": "families", "fresnel": "radiance"},
+    "lobes": {"per_frame": True, "illumination": "families", "lobe": "families"},
 }
+#: Methods scored by default on a set that has none cached (``--methods``).
+DEFAULT_METHODS = {"mitsuba_set": ("families", "lobes")}
 
 
 def direct_sun(truth: dict) -> bool:
@@ -67,6 +74,42 @@ def direct_sun(truth: dict) -> bool:
     if sky.startswith("cie-"):
         return int(sky.split("-")[1]) >= 6
     return True
+
+
+def material_class(truth: dict) -> str | None:
+    """Scoring class of a bundle's material: smooth or rough, plastic or metal
+    (the Mitsuba renderer writes it as ``material_class``; a Radiance
+    material is smooth where its roughness is 0)."""
+    if "material_class" in truth:
+        return truth["material_class"]
+    if truth.get("material") not in ("plastic", "metal"):
+        return None
+    smooth = "smooth" if not truth.get("roughness") else "rough"
+    return f"{smooth}-{truth['material']}"
+
+
+def class_table(scores: list[dict]) -> dict:
+    """Per material class and method: MAE and 90 % coverage (the reported
+    interval) on direct-sun sequences."""
+    out = {}
+    for cls in sorted({s.get("class") for s in scores if s.get("class")}):
+        sun = [
+            s
+            for s in scores
+            if s.get("class") == cls and s["direct_sun"] and s["truth"] is not None
+        ]
+        for m in METHODS:
+            rows = [s for s in sun if m in s]
+            if not rows:
+                continue
+            out.setdefault(cls, {})[m] = {
+                "n": len(rows),
+                "mae_direct_sun": float(np.mean([abs(s[m]["median"] - s["truth"]) for s in rows])),
+                "coverage90_direct_sun": float(np.mean([_holds(s[m], s["truth"]) for s in rows]))
+                if m != "baseline"
+                else None,
+            }
+    return out
 
 
 def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None = None) -> dict:
@@ -85,6 +128,7 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         "sky": truth.get("sky"),
         "truth": truth.get("gloss"),
         "direct_sun": direct_sun(truth),
+        "class": material_class(truth),
         "encoding": b.pixel_encoding,
         "facets": len(b.facets.ids),
     }
@@ -92,6 +136,8 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         t0 = time.perf_counter()
         base = baseline.bundle_peak_frame_gloss(b)
         out["baseline"] = {"median": float(base.object_gloss), "seconds": time.perf_counter() - t0}
+    if "lobes" in methods and "families" in methods:
+        methods = [m for m in methods if m != "families"]  # read off the lobes fit below
     for name, kwargs in ESTIMATES.items():
         if name not in methods:
             continue
@@ -116,11 +162,29 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
             out[name]["sky_models"] = res.summary.get("sky_models")
         if "sky_families" in res.summary:
             out[name]["sky_families"] = res.summary["sky_families"]
+        if "lobe_families" in res.summary:
+            lobes = res.summary["lobe_families"]
+            out[name]["lobe_families"] = lobes
+            if "families" not in out:  # the Phong fit stacked over the sky families
+                g = lobes["phong"]["gamma"]  # is exactly estimate's default answer (same seed)
+                out["families"] = {
+                    **{k: g[k] for k in ("median", "q05", "q95", "hdi90")},
+                    "flags": ["gloss-not-identifiable"]
+                    if np.ptp(g["hdi90"]) > estimate.NOT_IDENTIFIABLE_WIDTH
+                    else [],
+                    "model": "joint, one fit per sky family, stacked (read off 'lobes')",
+                    "illumination": "families",
+                }
     return out
 
 
 def _cached(
-    path: Path, max_sweeps: int, redo=(), scores: Path | None = None, committed: dict | None = None
+    path: Path,
+    max_sweeps: int,
+    redo=(),
+    scores: Path | None = None,
+    committed: dict | None = None,
+    methods=METHODS,
 ) -> dict:
     """The scores of one bundle, from the cache in ``scores`` where it has
     them, else from ``committed`` (the set's committed results, by bundle
@@ -133,7 +197,7 @@ def _cached(
         out = json.loads(file.read_text())
     else:
         out = dict((committed or {}).get(path.name, {}))
-    todo = [m for m in METHODS if m in redo or m not in out]
+    todo = [m for m in methods if m in redo or m not in out]
     if todo:
         out = score_bundle(str(path), max_sweeps, todo, out)
         file.write_text(json.dumps(out, indent=1))
@@ -182,16 +246,19 @@ def table(scores: list[dict]) -> dict:
     return out
 
 
-def figure(scores: list[dict], path: Path) -> None:
+def figure(
+    scores: list[dict], path: Path, methods=METHODS, title="Radiance validation set"
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(METHODS), figsize=(4.3 * len(METHODS), 4.5), sharey=True)
+    fig, axes = plt.subplots(1, len(methods), figsize=(4.3 * len(methods), 4.5), sharey=True)
+    axes = np.atleast_1d(axes)
     cats = sorted({s["category"] for s in scores})
     colours = dict(zip(cats, plt.cm.tab10(np.arange(len(cats))), strict=False))
-    for ax, m in zip(axes, METHODS, strict=True):
+    for ax, m in zip(axes, methods, strict=True):
         if not any(m in s for s in scores):
             ax.set_title(f"{m} (not run)")
         for s in scores:
@@ -220,7 +287,7 @@ def figure(scores: list[dict], path: Path) -> None:
     axes[0].set_ylabel("object gamma (median, 90 % interval)")
     handles = [plt.Line2D([], [], color=colours[c], marker="o", ls="") for c in cats]
     fig.legend(handles, cats, loc="lower center", ncol=len(cats), fontsize=8)
-    fig.suptitle("Radiance validation set: o direct sun, x overcast")
+    fig.suptitle(f"{title}: o direct sun, x overcast")
     fig.tight_layout(rect=(0, 0.08, 1, 0.95))
     fig.savefig(path, dpi=120)
 
@@ -309,7 +376,9 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--redo", nargs="*", default=[], choices=METHODS, help="methods to score afresh"
     )
+    ap.add_argument("--methods", nargs="*", default=None, choices=METHODS, help="methods to score")
     args = ap.parse_args(argv)
+    methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
     bundles = HERE / "out" / args.set / "bundles"
     name = SETS[args.set]
     paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
@@ -327,6 +396,7 @@ def main(argv=None) -> None:
                 [args.redo] * n,
                 [None] * n,
                 [committed] * n,
+                [methods] * n,
             )
         )
     RESULTS.mkdir(exist_ok=True)
@@ -334,13 +404,16 @@ def main(argv=None) -> None:
         "max_sweeps": args.max_sweeps,
         "table": table(scores),
         "sky_families": family_table(scores),
+        "classes": class_table(scores),
         "sequences": scores,
     }
     summary["broken_cloud_sun"] = sun_figure(
         scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
     )
     (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
-    figure(scores, RESULTS / f"{name}.png")
+    run = [m for m in METHODS if any(m in s for s in scores)]
+    title = "Mitsuba validation set" if args.set == "mitsuba_set" else "Radiance validation set"
+    figure(scores, RESULTS / f"{name}.png", run, title)
     for cat, row in summary["table"].items():
         print(cat, json.dumps(row))
 
