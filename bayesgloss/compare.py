@@ -64,6 +64,7 @@ from .evidence import (
 )
 from .loo import loo_compare
 from .sampling.ensemble import fold_copies, unfold_copies
+from .visibility import bundle_occlusion
 
 __all__ = [
     "REFLECTANCE_MODELS",
@@ -321,8 +322,14 @@ def bundle_models(
                 day, ground, rho = _daylight(b, ill)
                 geom = b.view_geometry()
                 sub = render.ViewGeometry(geom.normal[keep], geom.view_direction[keep])
+                occlusion = bundle_occlusion(b)  # None without object_mesh
                 ward = render.ward_facet_bases(
-                    sub, day, ground=ground, ground_reflectance=rho, diffuse=phong.diffuse
+                    sub,
+                    day,
+                    ground=ground,
+                    ground_reflectance=rho,
+                    diffuse=phong.diffuse,
+                    occlusion=None if occlusion is None else occlusion.take(keep),
                 )
             bases = ward if r == "lambert+ward" else phong
             models[(r, ill)] = comparison_model(

@@ -138,13 +138,17 @@ def bundle_curves(b) -> bundle_io.FacetCurves:
     (:func:`bayesgloss.visibility.shadow_flags`).
 
     Entries partly in the mesh's shadow (``partly-shadowed``: their pixels
-    mix lit and shadowed surface) and entries wholly in it where the convex
-    forward model would give the facet direct sun (``shadowed-by-object``)
-    are flagged and so left out of the likelihood. Entries in shadow where
-    the convex model agrees (sun behind the facet) are kept. The forward
-    model itself is unchanged: the sky and ground the mesh hides from a
-    kept entry are still counted as seen (a documented limitation). A
-    bundle without ``object_mesh`` gets exactly :func:`facet_curves`'s result.
+    mix lit and shadowed surface) are flagged and so left out of the
+    likelihood. Entries wholly in sun or wholly in the mesh's shadow are kept: the forward model
+    (:func:`bundle_bases`, :func:`bayesgloss.joint_estimate.joint_inputs`)
+    takes the mesh's :func:`bayesgloss.visibility.bundle_occlusion`, so a
+    kept entry's sun is its sunlit fraction (1 or 0 to within 0.02) and the
+    sky and ground the mesh hides are replaced by the light of the mesh's
+    faces. Partly shadowed entries stay out (:mod:`bayesgloss.visibility`:
+    the pixel summary of a facet half in shadow follows its lit and shadowed
+    pixels' shares as the labels and the statistic weigh them, not the
+    facet's area). A bundle without ``object_mesh`` gets exactly
+    :func:`facet_curves`'s result.
     """
     return shadow_flags(b, bundle_io.facet_curves(b))
 
@@ -156,9 +160,8 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     statistic with its saturated pixels at the top code
     (:attr:`bayesgloss.bundle.FacetCurves.lower_bound`), a lower bound of
     its true value, also where every pixel of the facet saturates. Every
-    other flag leaves the entry out (also ``partly-shadowed`` and
-    ``shadowed-by-object``, set by :func:`bundle_curves` from an
-    ``object_mesh``).
+    other flag leaves the entry out (also ``partly-shadowed``, set by
+    :func:`bundle_curves` from an ``object_mesh``).
     """
     sat_bit = 1 << bundle_io.FLAG_REASONS.index("saturated")
     only_saturated = curves.flag_bits == sat_bit

@@ -19,6 +19,7 @@ from ._thirdparty import arviz
 from .joint_estimate import bundle_sky
 from .pool import process_pool
 from .sky import sky_models
+from .visibility import bundle_occlusion
 
 __all__ = ["ILLUMINATION_MODELS", "bundle_bases", "facets_fit", "to_inference_data"]
 
@@ -32,7 +33,9 @@ def bundle_bases(
     """Forward-model bases of a bundle's facets under an illumination model.
 
     The sky model sees the bundle's ground reflectance (0.2 if absent) and a
-    ground plane (``"point-sun"``: nothing but the sun).
+    ground plane (``"point-sun"``: nothing but the sun); where the bundle has
+    ``object_mesh``, the bases take what it hides from each facet
+    (:func:`bayesgloss.visibility.bundle_occlusion`).
     """
     if illumination not in (*ILLUMINATION_MODELS, "measured"):
         raise ValueError(
@@ -43,7 +46,12 @@ def bundle_bases(
     day = bundle_sky(b, illumination, rho)
     ground = "sky" if illumination == "point-sun" else "plane"
     return render.facet_bases(
-        b.view_geometry(occluder), day, exponents, ground=ground, ground_reflectance=rho
+        b.view_geometry(occluder),
+        day,
+        exponents,
+        ground=ground,
+        ground_reflectance=rho,
+        occlusion=bundle_occlusion(b),  # None without object_mesh
     )
 
 

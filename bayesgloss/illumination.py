@@ -225,7 +225,10 @@ def illumination_bases(
         Phong-equivalent ``exponents``.
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
-        ``ground_reflectance``, ``lobe``...).
+        ``ground_reflectance``, ``lobe``...). ``occlusion`` (a
+        :class:`bayesgloss.render.Occlusion`, what a non-convex object's mesh
+        hides from each facet) also scales the sun's Fresnel term by each
+        facet's sunlit fraction.
     """
     from .sky import horizontal_irradiance
 
@@ -262,8 +265,15 @@ def illumination_bases(
         parts[0].exponents,
         1 + len(others),
         np.stack(ratios),
-        fr.fresnel_terms(geometry, sun_dir, e_sun),
+        _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun), kwargs.get("occlusion")),
     )
+
+
+def _sunlit(terms, occlusion):
+    """Fresnel terms with the sun's part in the object's own shadow taken out."""
+    if occlusion is None:
+        return terms
+    return dataclasses.replace(terms, sun_direct=terms.sun_direct * occlusion.sunlit_fraction)
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from .fresnel import FRESNEL_COLUMNS
 from .intervals import posterior_quantiles
 from .irradiance import measured_sky
 from .lobes import check_lobe_family, roughness_of_exponent
+from .visibility import bundle_occlusion
 
 __all__ = [
     "AUTO_SKIES",
@@ -88,6 +89,8 @@ def joint_inputs(
     ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
     used = ok.any(axis=0) & b.sun_up
     geometry = b.view_geometry()
+    # what a non-convex object's own mesh (object_mesh) hides from each facet
+    mesh = {} if (occlusion := bundle_occlusion(b)) is None else {"occlusion": occlusion}
     bases = il.illumination_bases(
         geometry,
         day,
@@ -95,6 +98,7 @@ def joint_inputs(
         lobe_family=lobe_family,
         ground=ground,
         ground_reflectance=rho,
+        **mesh,
     ).take(keep, used)
     exposure = None
     if b.exposure is not None:

@@ -929,12 +929,16 @@ def bundle_occlusion(bundle, **kwargs):
 
 
 def shadow_flags(bundle, curves, visibility: Visibility | None = None):
-    """The facet curves with the mesh's shadows flagged (bundles with ``object_mesh``).
+    """The facet curves with the mesh's partial shadows flagged (bundles with ``object_mesh``).
 
-    Sets ``partly-shadowed`` where a facet is partly in the mesh's shadow,
-    and ``shadowed-by-object`` where it is wholly in it but the convex model
-    gives it direct sun: both leave the entry out. A bundle without a mesh
-    gets ``curves`` back, the same object.
+    Sets ``partly-shadowed`` where the mesh shadows part of a facet (a
+    sunlit fraction between :data:`SHADOWED_MAX` and :data:`SUNLIT_MIN`),
+    which leaves the entry out. Entries wholly in the mesh's shadow are not
+    flagged: the forward model takes the mesh's :func:`occlusion`
+    (:func:`bundle_occlusion`) and gives them no sun. (``shadowed-by-object``
+    stays a flag name of :data:`bayesgloss.bundle.FLAG_REASONS` for results of
+    earlier versions, which left those entries out; it is no longer set.) A
+    bundle without a mesh gets ``curves`` back, the same object.
 
     Parameters
     ----------
@@ -951,5 +955,4 @@ def shadow_flags(bundle, curves, visibility: Visibility | None = None):
     reasons = bundle_io.FLAG_REASONS
     bits = curves.flag_bits.copy()
     bits |= visibility.partly_shadowed.astype(np.uint8) << reasons.index("partly-shadowed")
-    bits |= visibility.shadowed_by_object.astype(np.uint8) << reasons.index("shadowed-by-object")
     return dataclasses.replace(curves, flag_bits=bits)
