@@ -207,6 +207,7 @@ def ggx_glossy_basis(
     n_u: int = 16,
     n_phi: int = 16,
     chunk: int = 16,
+    occlusion: render.Occlusion | None = None,
 ) -> np.ndarray:
     """G_f(t; alpha): radiance of white facets with the normalised GGX lobe.
 
@@ -235,6 +236,9 @@ def ggx_glossy_basis(
         Nodes in xi and azimuth steps of h.
     chunk : int
         Facets per vectorised block (bounds memory).
+    occlusion : bayesgloss.render.Occlusion, optional
+        What a non-convex object's mesh hides from each facet, as in
+        :func:`bayesgloss.render.ward_glossy_basis`; None: a convex object.
 
     Returns
     -------
@@ -254,6 +258,16 @@ def ggx_glossy_basis(
     albedo = ggx_normal_albedo(alpha)  # (N,)
     quad = render.sphere_quadrature()
     sun, e_sun = render._sun_terms(sky)
+    occluder = geometry.occluder
+    if occlusion is not None:
+        occluder = None  # the mesh's ground shadow replaces the convex one
+        terms = render._occlusion_terms(
+            occlusion,
+            sky,
+            ground,
+            ground_reflectance,
+            render.sphere_quadrature(occlusion.resolution),
+        )
     out = np.empty((len(normal), len(alpha), len(sun)))
     for lo in range(0, len(normal), chunk):
         sl = slice(lo, lo + chunk)
@@ -278,17 +292,22 @@ def ggx_glossy_basis(
             sky,
             centers,
             inc,
-            geometry.occluder,
+            occluder,
             ground=ground,
             ground_reflectance=ground_reflectance,
             quadrature=quad,
         )  # (C, N, U, Phi, T)
+        if occlusion is not None:
+            facet = np.arange(lo, lo + len(inc))[:, None, None, None]
+            radiance = render._occluded(radiance, inc, facet, terms, occlusion.resolution)
         out[sl] = np.einsum("cnup,cnupk->cnk", weight, radiance)
         # the sun as a point source: f(sun, o) cos(theta_s) E_sun / A
         f_sun = ggx_smith(
             sun[None, None, :, :], o_[:, None, None, :], n_[:, None, None, :], alpha[None, :, None]
         )  # (C, N, T)
         cos_s = np.maximum(n_ @ sun.T, 0.0)[:, None, :]
+        if occlusion is not None:
+            cos_s = cos_s * occlusion.sunlit_fraction[sl, None, :]
         out[sl] += f_sun * cos_s * e_sun[None, None, :] / albedo[None, :, None]
     return out
 
@@ -301,15 +320,19 @@ def glossy_basis(
     family: str = "phong",
     ground: str = "plane",
     ground_reflectance: float = 0.2,
+    occlusion: render.Occlusion | None = None,
 ) -> np.ndarray:
     """G_f(t; n) of a lobe family on a table of Phong-equivalent exponents, (F, N, T).
 
     ``"phong"``: :func:`bayesgloss.render.glossy_basis`; ``"ward"`` and
     ``"ggx"``: the family's basis at alpha = :func:`roughness_of_exponent` (n)
-    (module docstring) [W sr^-1 m^-2].
+    (module docstring) [W sr^-1 m^-2]. ``occlusion``: what a non-convex
+    object's mesh hides from each facet (:class:`bayesgloss.render.Occlusion`).
     """
     check_lobe_family(family)
     common = dict(ground=ground, ground_reflectance=ground_reflectance)
+    if occlusion is not None:
+        common["occlusion"] = occlusion
     n = np.atleast_1d(np.asarray(exponents, dtype=float))
     if family == "phong":
         return render.glossy_basis(geometry, sky, n, **common)

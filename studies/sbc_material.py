@@ -17,10 +17,13 @@ studies/README.md). Too long for the test suite.
     python studies/sbc_material.py [--n 100] [--seed 2027] [--jobs 2]
         [--max-sweeps 4000] [--out studies/results/sbc_material.json]
         [--fresnel radiance --out studies/results/sbc_material_fresnel.json]
+        [--lobe ggx --out studies/results/sbc_material_ggx.json]
 
 With ``--fresnel radiance`` the model has the Fresnel raise
 (:mod:`bayesgloss.fresnel`), its strength k and normal-incidence albedo A
-drawn from their prior with the rest, and k's rank is tested too.
+drawn from their prior with the rest, and k's rank is tested too. With
+``--lobe ward`` or ``ggx`` the glossy basis is that family's
+(:mod:`bayesgloss.lobes`), on the same Phong-equivalent exponent axis.
 """
 
 from __future__ import annotations
@@ -42,8 +45,9 @@ from bayesgloss.pool import process_pool
 from bayesgloss.sampling import sample_material
 
 
-def paper_three_skies():
-    """Split bases of the paper scene (SW) under the ``auto`` mixture, sun-up frames."""
+def paper_three_skies(lobe_family: str = "phong"):
+    """Split bases of the paper scene (SW) under the ``auto`` mixture, sun-up
+    frames, with the glossy lobe of ``lobe_family`` (:mod:`bayesgloss.lobes`)."""
     seq = scene.paper_sequence(view="SW")
     g = scene.seen_geometry(seq)
     up = seq.sky.sun_direction[:, 2] > 0.02
@@ -51,7 +55,7 @@ def paper_three_skies():
         sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
         for name in ("gensky-intermediate", "gensky-overcast")
     ]
-    return il.illumination_bases(g, seq.sky, others=others), up
+    return il.illumination_bases(g, seq.sky, others=others, lobe_family=lobe_family), up
 
 
 def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8, fresnel: str = "none"):
@@ -118,9 +122,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="studies/results/sbc_material.json")
     ap.add_argument("--fresnel", default="none", choices=("none", "radiance"))
+    ap.add_argument("--lobe", default="phong", choices=("phong", "ward", "ggx"))
     args = ap.parse_args(argv)
     t0 = time.time()
-    ref = sbc_design(paper_three_skies(), fresnel=args.fresnel)
+    ref = sbc_design(paper_three_skies(args.lobe), fresnel=args.fresnel)
     run = functools.partial(sbc_object, ref, args.seed, max_sweeps=args.max_sweeps)
     rows = []
     with process_pool(args.jobs) as pool:
@@ -131,6 +136,7 @@ def main(argv=None) -> dict:
     out = {"n": args.n, "seed": args.seed, "draws": 99, "minutes": (time.time() - t0) / 60}
     out["design"] = {"facets": ref.shape[0], "frames": ref.shape[1], "max_sweeps": args.max_sweeps}
     out["design"]["fresnel"] = args.fresnel
+    out["design"]["lobe_family"] = args.lobe
     out["converged"] = float(np.mean([r["converged"] for r in rows]))
     out["rhat_walkers_quantiles"] = np.quantile(
         [r["rhat_walkers"] for r in rows], [0.5, 0.9, 1.0]
