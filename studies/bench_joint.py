@@ -11,7 +11,11 @@ process; the fixed model's batched sampler is given the same one core), and
 the figures are wall-clock seconds, sweeps, and whether the run met the
 convergence rule, with the ratio of the medians measured in this run.
 
-Usage: python studies/bench_joint.py [--repeats 3] [--max-sweeps N]
+With ``--lobes`` the default estimate is timed again with ``--lobe
+families`` (:mod:`bayesgloss.lobe_families`: two fits more, the Ward and
+GGX lobes under the most-weighted sky family).
+
+Usage: python studies/bench_joint.py [--repeats 3] [--max-sweeps N] [--lobes]
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ def bench_config():
     )
 
 
-def run(repeats: int, max_sweeps: int) -> dict:
+def run(repeats: int, max_sweeps: int, lobes: bool = False) -> dict:
     """Time both estimates ``repeats`` times; the rows and their medians."""
     from bayesgloss import bundle, estimate, sequences
 
@@ -53,7 +57,8 @@ def run(repeats: int, max_sweeps: int) -> dict:
     (path,) = sequences.render_bundles([bench_config()], OUT, jobs=2, progress=False)
     b = bundle.read_bundle(path)
     rows = []
-    for per_frame in (False, True):
+    variants = [(False, None), (True, None)] + ([(True, "families")] if lobes else [])
+    for per_frame, lobe in variants:
         for seed in range(repeats):
             t0 = time.perf_counter()
             res = estimate.estimate_bundle(
@@ -62,6 +67,7 @@ def run(repeats: int, max_sweeps: int) -> dict:
                 illumination=None if per_frame else "gensky-clear",
                 seed=seed,
                 sampler_options={"max_steps": max_sweeps},
+                lobe=lobe,
             )
             obj = res.summary["object"]
             rows.append(
@@ -89,16 +95,22 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument(
+        "--lobes", action="store_true", help="also time --lobe families (bayesgloss.lobe_families)"
+    )
+    ap.add_argument(
         "--max-sweeps", type=int, default=None, help="default: estimate's (2000 sweeps, 8000 steps)"
     )
     args = ap.parse_args(argv)
-    out = run(args.repeats, args.max_sweeps)
+    out = run(args.repeats, args.max_sweeps, args.lobes)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench_joint.json").write_text(json.dumps(out, indent=1))
     med = out["median_seconds"]
     print("median seconds:", json.dumps(med))
     if "joint" in med and "facets" in med:
         print(f"joint / fixed: {med['joint'] / med['facets']:.1f}x")
+    for model, seconds in med.items():
+        if "facets" in med:
+            print(f"{model} / fixed: {seconds / med['facets']:.1f}x")
 
 
 if __name__ == "__main__":
