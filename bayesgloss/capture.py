@@ -10,8 +10,8 @@ bundle from what a user of a tripod camera has:
   docstring gives the fields): OpenCV's pinhole model with its distortion,
   and the pose; or a COLMAP sparse model of the photos
   (:func:`bayesgloss.camera_model.read_colmap`), in the mesh's frame;
-- the **photos** (JPEG, PNG, TIFF) with their times, exposures and, perhaps,
-  the site in EXIF (:mod:`bayesgloss.exif`).
+- the **photos** (JPEG, PNG, TIFF, or camera RAW through ``rawpy``) with
+  their times, exposures and, perhaps, the site in EXIF (:mod:`bayesgloss.exif`).
 
 The label image is made in the *distorted* camera: frames are written as
 stored (no resampling), and each pixel's rays are the undistorted
@@ -43,7 +43,11 @@ written in time order. Its exposure is EXIF ``ExposureTime`` x ISO /
 The site is EXIF GPS (the first photo that has it) unless given.
 
 JPEG frames are decoded and written as 8-bit PNG (the same codes), ``srgb``;
-PNG and TIFF frames are copied as they are, with the pixel encoding given.
+camera RAW frames are decoded linearly by LibRaw
+(:func:`bayesgloss.images.read_raw`: black level off, the camera's white
+balance, demosaiced, linear sRGB primaries, no transfer curve) and written
+as 16-bit PNG, ``linear``; PNG and TIFF frames are copied as they are, with
+the pixel encoding given. One bundle's photos share one encoding.
 The mesh, in the world frame, is the bundle's ``object_mesh``.
 
 Bad input raises :class:`CaptureError`, which names the file, the field and
@@ -74,6 +78,7 @@ from .camera_model import (
 )
 from .exif import photo_exposure, photo_orientation, photo_site, photo_time
 from .geometry import Facets
+from .images import RAW_SUFFIXES
 
 __all__ = [
     "CaptureError",
@@ -90,8 +95,8 @@ __all__ = [
     "label_overlay",
 ]
 
-#: File name endings of photos read from a folder.
-PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+#: File name endings of photos read from a folder (camera RAW: :data:`RAW_SUFFIXES`).
+PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", *RAW_SUFFIXES)
 #: File name endings of meshes.
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
 #: Default largest angle between a facet's faces and its seed face [deg].
@@ -385,7 +390,7 @@ def _cast(mesh, face_region, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 
 def find_photos(items: Sequence[str | os.PathLike]) -> list[Path]:
-    """Photo files of folders (their JPEG, PNG and TIFF files, by name) and files.
+    """Photo files of folders (their JPEG, PNG, TIFF and RAW files, by name) and files.
 
     Raises
     ------
@@ -403,24 +408,37 @@ def find_photos(items: Sequence[str | os.PathLike]) -> list[Path]:
             raise CaptureError("photos", path, "file", "no such file or folder")
     if not found:
         raise CaptureError(
-            "photos", ", ".join(map(str, items)), "file", "holds no JPEG, PNG or TIFF photo"
-        )
+            "photos", ", ".join(map(str, items)), "file",
+            "holds no photo (JPEG, PNG, TIFF or camera RAW)",
+        )  # fmt: skip
     return found
 
 
 def _photo_pixels(path: Path, camera: Camera, camera_file) -> tuple[Any, str]:
-    """What the bundle gets of a photo: a uint8 array (JPEG) or the file, and its kind."""
+    """What the bundle gets of a photo: a uint8 (JPEG) or uint16 (RAW) array or the
+    file, and its kind ("jpeg", "raw", "png", "tiff")."""
     from PIL import Image
 
-    from .images import image_info, image_kind
+    from .images import image_info, image_kind, read_raw
 
     try:
-        kind = image_kind(path)
+        if path.suffix.lower() in RAW_SUFFIXES:  # before the magic bytes: a DNG is a TIFF
+            kind = "raw"
+        else:
+            kind = image_kind(path)
     except OSError as err:
         raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
     except ValueError:
         kind = "jpeg"
-    if kind in ("png", "tiff"):
+    if kind == "raw":
+        try:
+            frame = read_raw(path)
+        except ImportError as err:
+            raise CaptureError("photo", path, "file", str(err)) from None
+        except ValueError as err:
+            raise CaptureError("photo", path, "file", str(err)) from None
+        size = (frame.shape[1], frame.shape[0])
+    elif kind in ("png", "tiff"):
         try:
             info = image_info(path)
         except Exception as err:
@@ -435,11 +453,13 @@ def _photo_pixels(path: Path, camera: Camera, camera_file) -> tuple[Any, str]:
             raise CaptureError("photo", path, "file", f"cannot read the photo: {err}") from None
         if frame is None:
             raise CaptureError(
-                "photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF"
+                "photo", path, "file", f"a {kind} file; photos are JPEG, PNG, TIFF or camera RAW"
             )
         size = (frame.shape[1], frame.shape[0])
     else:
-        raise CaptureError("photo", path, "file", f"a {kind} file; photos are JPEG, PNG or TIFF")
+        raise CaptureError(
+            "photo", path, "file", f"a {kind} file; photos are JPEG, PNG, TIFF or camera RAW"
+        )
     if size != (camera.width, camera.height):
         turned = ""
         if size == (camera.height, camera.width) and photo_orientation(path) >= 5:
@@ -532,7 +552,8 @@ def make_bundle(
     transform : ndarray (4, 4), optional
         Mesh file coordinates to the world frame [m].
     pixel_encoding : str
-        ``camera.pixel_encoding`` of PNG and TIFF photos; JPEGs are ``srgb``. -
+        ``camera.pixel_encoding`` of PNG and TIFF photos; JPEGs are ``srgb``,
+        camera RAW files ``linear``. -
     overwrite : bool
         Replace an existing bundle at ``out``. -
 
@@ -617,11 +638,16 @@ def make_bundle(
     facet_normal, facet_center = normal[keep], center[keep]
     facets = Facets(np.arange(1, len(keep) + 1), facet_normal, facet_center)
 
-    encoding = "srgb" if all(k == "jpeg" for k in kinds) else pixel_encoding
-    if "jpeg" in kinds and encoding != "srgb":
+    # JPEG is srgb and RAW linear; PNG and TIFF are as stated
+    encodings = [{"jpeg": "srgb", "raw": "linear"}.get(k, pixel_encoding) for k in kinds]
+    encoding = encodings[0]
+    if any(e != encoding for e in encodings):
+        odd = next(i for i, e in enumerate(encodings) if e != encoding)
         raise CaptureError(
-            "photos", files[kinds.index("jpeg")], "pixel_encoding",
-            f"JPEG photos are srgb; cannot mix them with {pixel_encoding} PNG or TIFF photos",
+            "photos", files[odd], "pixel_encoding",
+            f"a {kinds[odd]} photo is {encodings[odd]}, '{files[0].name}' ({kinds[0]}) "
+            f"{encoding}: one bundle's photos share one encoding (JPEG srgb, RAW linear, "
+            f"PNG and TIFF {pixel_encoding})",
         )  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="bayesgloss-capture-") as tmp:
         mesh_file = Path(mesh)
@@ -637,7 +663,7 @@ def make_bundle(
             times=[t.isoformat() for t in times],
             facets=facets,
             labels=labels,
-            frame_format="png8",
+            frame_format="png16" if "raw" in kinds else "png8",
             exposure=exposure,
             object_mesh=mesh_file,
             extra={"capture": _provenance(mesh, camera, cam, facet_angle, min_facet_pixels)},

@@ -6,7 +6,12 @@ is EXIF ``DateTimeOriginal`` (with ``SubSecTimeOriginal``) at
 wrote none (:func:`photo_time`); its relative exposure is ``ExposureTime``
 x ISO / ``FNumber``^2 (:func:`photo_exposure`); the site is the GPS
 position (:func:`photo_site`). Tags as CIPA DC-008 (Exif 2.32) numbers
-them; read with Pillow, from JPEG, PNG (``eXIf``) and TIFF.
+them; read with Pillow, from JPEG, PNG (``eXIf``) and TIFF. Camera RAW files
+(:data:`bayesgloss.images.RAW_SUFFIXES`) are read with ``tifffile`` where
+they are TIFF-based (DNG, NEF, CR2, ARW, PEF, ...): the Exif IFD, and the
+same tags in IFD0 where TIFF/EP puts them; other RAW formats (CR3, RAF, ...)
+give LibRaw's reading (``rawpy``'s ``other``: the time without its UTC
+offset, shutter, aperture, ISO).
 """
 
 from __future__ import annotations
@@ -32,10 +37,104 @@ _GPS_LAT_REF, _GPS_LAT, _GPS_LON_REF, _GPS_LON, _GPS_ALT_REF, _GPS_ALT = 1, 2, 3
 _OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
 
 
+#: Tags whose values are RATIONALs (read as floats from RAW files).
+_RATIONAL = {_EXPOSURE_TIME, _F_NUMBER, _GPS_ALT}
+#: Exif tags TIFF/EP (ISO 12234-2) places in IFD0 of a RAW file.
+_TIFF_EP = (_DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL, _EXPOSURE_TIME,
+            _F_NUMBER, _ISO)  # fmt: skip
+
+
+def _number(value):
+    """A tifffile value as Pillow gives it: a RATIONAL pair (num, den) as a float."""
+    if isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, int) for v in value):
+        return value[0] / value[1] if value[1] else float("nan")
+    return value
+
+
+def _raw_exif(path: Path) -> tuple[dict, dict, dict]:
+    """:func:`_exif` of a camera RAW file: tifffile's tags, else LibRaw's reading."""
+    import tifffile
+    from tifffile import TIFF
+
+    from .images import _quiet_tifffile
+
+    codes = {name: code for code, name in TIFF.TAGS.items()}
+    try:
+        with _quiet_tifffile(), tifffile.TiffFile(path) as tif:
+            tags = {t.code: t.value for t in tif.pages[0].tags.values()}
+    except Exception:  # not TIFF-based (CR3, RAF, ...), or not a RAW file at all
+        return _libraw_exif(path)
+
+    def by_code(named) -> dict:
+        out = {}
+        for name, value in (named or {}).items():
+            code = codes.get(name)
+            if code is None:
+                continue
+            if code == _GPS_LAT or code == _GPS_LON:  # 3 RATIONALs, flattened
+                value = tuple(value[k] / value[k + 1] for k in (0, 2, 4))
+            out[code] = _number(value) if code in _RATIONAL else value
+        return out
+
+    main = {code: v for code, v in tags.items() if not isinstance(v, dict)}
+    exif = {code: _number(main[code]) for code in _TIFF_EP if code in main}
+    exif.update(by_code(tags.get(_EXIF_IFD)))
+    gps = tags.get(_GPS_IFD)
+    gps = {**gps} if isinstance(gps, dict) else {}
+    gps_codes = {"GPSLatitudeRef": _GPS_LAT_REF, "GPSLatitude": _GPS_LAT,
+                 "GPSLongitudeRef": _GPS_LON_REF, "GPSLongitude": _GPS_LON,
+                 "GPSAltitudeRef": _GPS_ALT_REF, "GPSAltitude": _GPS_ALT}  # fmt: skip
+    gps = {gps_codes[k]: v for k, v in gps.items() if k in gps_codes}
+    for code in (_GPS_LAT, _GPS_LON):
+        if code in gps and len(gps[code]) == 6:
+            v = gps[code]
+            gps[code] = tuple(v[k] / v[k + 1] for k in (0, 2, 4))
+    if _GPS_ALT in gps:
+        gps[_GPS_ALT] = _number(gps[_GPS_ALT])
+    if not exif.get(_DATETIME_ORIGINAL):  # a maker's format tifffile reads without Exif
+        exif = {**_libraw_exif(path)[1], **exif}
+    return main, exif, gps
+
+
+def _libraw_exif(path: Path) -> tuple[dict, dict, dict]:
+    """What LibRaw (``rawpy``) reads of a RAW file's time and exposure: no offset, no GPS."""
+    from .images import read_raw
+
+    try:
+        import rawpy
+    except ImportError:
+        read_raw(path)  # raises the ImportError that names the extra
+        raise
+    try:
+        with rawpy.imread(str(path)) as raw:
+            other = raw.other
+    except (rawpy.LibRawError, rawpy.NotSupportedError):
+        try:
+            read_raw(path)  # its one-line reason
+        except ValueError as err:
+            raise CaptureError("photo", path, "file", str(err)) from None
+        raise
+    exif = {}
+    stamp = other.timestamp
+    if isinstance(stamp, int | float) and stamp > 0:  # older rawpy: seconds
+        stamp = _dt.datetime.fromtimestamp(stamp)
+    if isinstance(stamp, _dt.datetime):  # the camera's clock, as LibRaw read it
+        exif[_DATETIME_ORIGINAL] = stamp.strftime("%Y:%m:%d %H:%M:%S")
+    for code, value in ((_EXPOSURE_TIME, other.shutter_speed), (_F_NUMBER, other.aperture),
+                        (_ISO, other.iso_speed)):  # fmt: skip
+        if value and value > 0:
+            exif[code] = float(value)
+    return {}, exif, {}
+
+
 def _exif(path: Path) -> tuple[dict, dict, dict]:
     """A photo's EXIF: the main IFD, the Exif IFD and the GPS IFD (tag -> value)."""
     from PIL import Image
 
+    from .images import RAW_SUFFIXES
+
+    if path.suffix.lower() in RAW_SUFFIXES:
+        return _raw_exif(path)
     try:
         with Image.open(path) as img:
             exif = img.getexif()

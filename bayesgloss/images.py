@@ -4,8 +4,10 @@ Radiance RGBE pictures (own reader and writer: flat and both run-length
 styles, EXPOSURE and COLORCORR, every orientation of the resolution string),
 8- and 16-bit PNG through pypng (keeping all 16 bits; Pillow drops the low
 byte of 16-bit RGB), TIFF through tifffile, OpenEXR through the optional
-``openexr`` package, and the pixel encodings of the bundle spec
-(``linear-radiance``, ``linear``, ``srgb``, ``gamma:G``, ``unknown``).
+``openexr`` package, camera RAW files decoded linearly through the optional
+``rawpy`` (LibRaw; :func:`read_raw`, for ``bundle make``), and the pixel
+encodings of the bundle spec (``linear-radiance``, ``linear``, ``srgb``,
+``gamma:G``, ``unknown``).
 :mod:`bayesgloss.bundle` re-exports every public name here.
 """
 
@@ -24,6 +26,7 @@ import numpy as np
 
 __all__ = [
     "PIXEL_ENCODINGS",
+    "RAW_SUFFIXES",
     "ImageInfo",
     "decode_pixels",
     "float_to_rgbe",
@@ -36,6 +39,7 @@ __all__ = [
     "read_image",
     "read_labels",
     "read_png",
+    "read_raw",
     "read_tiff",
     "rgbe_to_float",
     "srgb_to_linear",
@@ -47,6 +51,14 @@ __all__ = [
 
 #: Values of ``camera.pixel_encoding`` (``gamma:G`` with a number G > 0).
 PIXEL_ENCODINGS = ("linear-radiance", "linear", "srgb", "gamma:G", "unknown")
+
+#: File name endings of camera RAW files (:func:`read_raw`): Adobe DNG and the
+#: makers' formats LibRaw reads.
+RAW_SUFFIXES = (
+    ".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf",
+    ".rw2", ".pef", ".srw", ".3fr", ".iiq", ".erf", ".kdc", ".mef", ".mos", ".mrw", ".x3f",
+    ".rwl",
+)  # fmt: skip
 
 # ---------------------------------------------------------------------------
 # Radiance RGBE pictures
@@ -588,6 +600,67 @@ def image_info(path: str | os.PathLike) -> ImageInfo:
     return ImageInfo(
         int(high[1] - low[1] + 1), int(high[0] - low[0] + 1), channels, np.dtype(np.float32), kind
     )
+
+
+def read_raw(path: str | os.PathLike, white_balance: str = "camera") -> np.ndarray:
+    """A camera RAW file decoded linearly by LibRaw (``rawpy``): RGB linear in radiance.
+
+    LibRaw subtracts the black level, scales to the white level, applies the
+    white balance, demosaics (AHD) and converts the camera's colours to
+    linear sRGB primaries (the file's colour matrix), with no transfer curve
+    (``gamma=(1, 1)``), no automatic brightening and the image as stored
+    (``user_flip=0``: EXIF orientation not applied, as for other photos):
+    each output value is a fixed linear combination of the raw values, so
+    pixel ratios are radiance ratios. Saturated photosites clip at the top
+    code (65535), which the bundle reader flags.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A RAW file of a format LibRaw reads (DNG, NEF, CR2, CR3, ARW, RAF, ...). -
+    white_balance : {"camera", "daylight"}
+        The camera's as-shot white balance (LibRaw falls back to its daylight
+        multipliers where the file has none), or LibRaw's daylight
+        multipliers for the camera. -
+
+    Returns
+    -------
+    ndarray (H, W, 3) of uint16
+        Linear RGB codes [-].
+
+    Raises
+    ------
+    ImportError
+        Without ``rawpy`` (``pip install bayesgloss[raw]``).
+    ValueError
+        A file LibRaw cannot decode, naming it and LibRaw's reason.
+    """
+    if white_balance not in ("camera", "daylight"):
+        raise ValueError(f"white_balance must be camera or daylight, got {white_balance!r}")
+    try:
+        import rawpy
+    except ImportError:
+        raise ImportError(
+            "reading camera RAW files needs rawpy: pip install 'bayesgloss[raw]'"
+        ) from None
+    path = Path(path)
+    try:
+        with rawpy.imread(os.fspath(path)) as raw:
+            rgb = raw.postprocess(
+                gamma=(1.0, 1.0),  # linear: no transfer curve
+                no_auto_bright=True,
+                output_bps=16,
+                use_camera_wb=white_balance == "camera",
+                use_auto_wb=False,
+                user_flip=0,
+                output_color=rawpy.ColorSpace.sRGB,
+            )
+    except (rawpy.LibRawError, rawpy.NotSupportedError) as err:
+        reason = err.args[0] if err.args else type(err).__name__
+        if isinstance(reason, bytes):  # LibRaw's message, as rawpy passes it
+            reason = reason.decode(errors="replace")
+        raise ValueError(f"{path.name}: rawpy (LibRaw) cannot decode it: {reason}") from None
+    return np.ascontiguousarray(rgb, dtype=np.uint16)
 
 
 def read_image(path: str | os.PathLike) -> tuple[np.ndarray, int | None]:

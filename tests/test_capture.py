@@ -775,7 +775,10 @@ def test_photos_as_files_and_a_turned_photo(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert _make(mesh, camera, tmp_path / "empty", tmp_path / "none") == 2
     err = capsys.readouterr().err
-    assert f"photos '{tmp_path / 'empty'}'" in err and "holds no JPEG, PNG or TIFF" in err
+    assert (
+        f"photos '{tmp_path / 'empty'}'" in err
+        and "holds no photo (JPEG, PNG, TIFF or camera RAW)" in err
+    )
 
 
 def test_undistort_refuses_a_root_past_the_lens_models_fold():
@@ -789,3 +792,161 @@ def test_undistort_refuses_a_root_past_the_lens_models_fold():
     np.testing.assert_allclose(camera_model.distort(far[2], k), [0.1, 0.05], atol=1e-12)
     x = np.array([-0.72, 0.0])  # the spurious root exists
     assert np.linalg.norm(camera_model.distort(x, k) - [0.72 * (3 * 0.72**2 - 1), 0]) < 1e-12
+
+
+# -- camera RAW (rawpy, decoded linearly) ---------------------------------------------
+
+
+def write_dng(path, cfa, when=None, offset=None, exposure=None, black=256, white=16383,
+              neutral=(0.5, 1.0, 0.625)):  # fmt: skip
+    """A minimal uncompressed Bayer (RGGB) DNG 1.4, little-endian, written byte by
+    byte from the TIFF 6.0 and DNG 1.4 specifications: IFD0 with the DNG tags (black
+    and white levels, an identity ColorMatrix1, AsShotNeutral ``neutral``, the
+    camera's response to a grey) and an Exif IFD with DateTimeOriginal,
+    OffsetTimeOriginal, ExposureTime [s], FNumber and ISO (``exposure``)."""
+    import struct
+
+    cfa = np.ascontiguousarray(cfa, dtype="<u2")
+    h, w = cfa.shape
+    byte, ascii_, short, long_, rational, srational = 1, 2, 3, 4, 5, 10
+
+    def ratio(v):
+        f = Fraction(v).limit_denominator(1_000_000)
+        return (f.numerator, f.denominator)
+
+    exif = []
+    if when is not None:
+        exif.append((36867, ascii_, when.encode() + b"\0"))
+    if offset is not None:
+        exif.append((36881, ascii_, offset.encode() + b"\0"))
+    if exposure is not None:
+        t, n, iso = exposure
+        exif += [(33434, rational, [ratio(t)]), (33437, rational, [ratio(n)]),
+                 (34855, short, [int(iso)])]  # fmt: skip
+    identity = [(1, 1), (0, 1), (0, 1), (0, 1), (1, 1), (0, 1), (0, 1), (0, 1), (1, 1)]
+
+    def ifd0(pixels_at, exif_at):
+        tags = [
+            (254, long_, [0]), (256, long_, [w]), (257, long_, [h]), (258, short, [16]),
+            (259, short, [1]), (262, short, [32803]), (271, ascii_, b"bayesgloss\0"),
+            (272, ascii_, b"test DNG\0"), (273, long_, [pixels_at]), (274, short, [1]),
+            (277, short, [1]), (278, long_, [h]), (279, long_, [cfa.nbytes]),
+            (284, short, [1]), (33421, short, [2, 2]), (33422, byte, bytes([0, 1, 1, 2])),
+            (50706, byte, bytes([1, 4, 0, 0])), (50708, ascii_, b"bayesgloss test DNG\0"),
+            (50714, long_, [black]), (50717, long_, [white]), (50721, srational, identity),
+            (50728, rational, [ratio(v) for v in neutral]), (50778, short, [21]),
+        ]  # fmt: skip
+        return tags + ([(34665, long_, [exif_at])] if exif else [])
+
+    def packed(typ, value):
+        if typ in (byte, ascii_):
+            return bytes(value)
+        if typ in (short, long_):
+            return struct.pack(f"<{len(value)}{'H' if typ == short else 'I'}", *value)
+        return b"".join(struct.pack("<ii" if typ == srational else "<II", *r) for r in value)
+
+    def block(entries, start):
+        """An IFD at file offset ``start``, then its values longer than 4 bytes."""
+        head, data = struct.pack("<H", len(entries)), b""
+        data_at = start + 2 + 12 * len(entries) + 4
+        for tag, typ, value in sorted(entries, key=lambda e: e[0]):
+            raw = packed(typ, value)
+            field = raw.ljust(4, b"\0") if len(raw) <= 4 else struct.pack("<I", data_at + len(data))
+            if len(raw) > 4:
+                data += raw + b"\0" * (len(raw) % 2)
+            head += struct.pack("<HHI", tag, typ, len(value)) + field
+        return head + struct.pack("<I", 0) + data
+
+    exif_at = 8 + len(block(ifd0(0, 0), 8))  # the sizes do not depend on the offsets
+    exif_block = block(exif, exif_at) if exif else b""
+    pixels_at = exif_at + len(exif_block) + (exif_at + len(exif_block)) % 2
+    out = b"II*\0" + struct.pack("<I", 8) + block(ifd0(pixels_at, exif_at), 8) + exif_block
+    path.write_bytes(out.ljust(pixels_at, b"\0") + cfa.tobytes())
+    return path
+
+
+def bayer(scene, gain, black=256, white=16383, neutral=(0.5, 1.0, 0.625)):
+    """RGGB raw codes of a grey scene (H, W) of relative radiance, times ``gain``."""
+    h, w = scene.shape
+    channel = np.array([[0, 1], [1, 2]])[np.arange(h)[:, None] % 2, np.arange(w)[None, :] % 2]
+    codes = black + gain * scene * np.asarray(neutral)[channel] * (white - black)
+    return np.clip(np.rint(codes), 0, white).astype(np.uint16)
+
+
+def test_raw_is_decoded_linearly(tmp_path):
+    pytest.importorskip("rawpy")
+    from bayesgloss import images
+
+    h, w = 36, 48
+    scene = np.broadcast_to(0.05 + 0.4 * np.linspace(0, 1, w), (h, w))  # a grey ramp
+    one = write_dng(tmp_path / "one.dng", bayer(scene, 1.0))
+    half = write_dng(tmp_path / "half.dng", bayer(scene, 0.5))
+    a, b = images.read_raw(one), images.read_raw(half)
+    assert a.shape == (h, w, 3) and a.dtype == np.uint16
+    inner = (slice(2, -2), slice(2, -2))  # the demosaic's border pixels aside
+    ratio = a[inner] / b[inner].astype(float)
+    print(f"pixel ratio of exposures 1 and 1/2: {ratio.min():.4f} - {ratio.max():.4f}")
+    np.testing.assert_allclose(ratio, 2.0, rtol=0.01)  # measured 1.993 - 2.008 (rounding)
+    # linear in the scene: codes = 65535 x (raw - black) / (white - black) after the white
+    # balance (AsShotNeutral) makes the grey grey; no transfer curve, no brightening
+    want = np.broadcast_to(65535 * scene[inner][..., None], a[inner].shape)
+    fit = np.polyfit(want.ravel(), a[inner].astype(float).ravel(), 1)
+    deviation = np.max(np.abs(a[inner] - np.polyval(fit, want))) / 65535
+    print(f"codes against the scene: slope {fit[0]:.5f}, intercept {fit[1]:.2f}, largest "
+          f"deviation from the line {deviation:.2e} of full scale")  # fmt: skip
+    np.testing.assert_allclose(a[inner], want, rtol=0.005, atol=3)  # the demosaic's few codes
+    assert deviation < 1e-3
+    (tmp_path / "bad.nef").write_bytes(b"not a raw file " * 64)
+    with pytest.raises(ValueError, match=r"bad\.nef: rawpy \(LibRaw\) cannot decode it"):
+        images.read_raw(tmp_path / "bad.nef")
+
+
+def test_raw_exif_from_its_tiff_tags_and_from_libraw(tmp_path):
+    pytest.importorskip("rawpy")
+    p = write_dng(tmp_path / "a.dng", bayer(np.full((32, 32), 0.3), 1.0),
+                  when="2024:06:21 14:30:05", offset="+02:00",
+                  exposure=(1 / 250, 5.6, 400))  # fmt: skip
+    assert exif.photo_time(p) == pd.Timestamp("2024-06-21T12:30:05Z")
+    assert exif.photo_exposure(p) == pytest.approx(400 / 250 / 5.6**2, rel=1e-9)
+    assert exif.photo_site(p) is None and exif.photo_orientation(p) == 1
+    # LibRaw's own reading, for RAW formats that are not TIFF: the time without offset
+    _, tags, _ = exif._libraw_exif(p)
+    assert tags[0x9003] == "2024:06:21 14:30:05" and 0x9011 not in tags
+    t, n, iso = tags[0x829A], tags[0x829D], tags[0x8827]
+    assert t * iso / n**2 == pytest.approx(400 / 250 / 5.6**2, rel=1e-6)
+
+
+def test_bundle_make_from_raw_photos_is_linear(tmp_path, capsys):
+    pytest.importorskip("rawpy")
+    mesh, camera, photos = _box_scene(tmp_path)
+    raws = tmp_path / "raws"
+    raws.mkdir()
+    for k, (hour, gain) in enumerate(((10, 0.8), (14, 0.4))):
+        write_dng(raws / f"IMG_{k}.DNG", bayer(np.full((36, 48), 0.5), gain),
+                  when=f"2024:06:21 {hour}:00:00", offset="+01:00",
+                  exposure=(gain / 100, 8.0, 100))  # fmt: skip
+    out = tmp_path / "out"
+    assert _make(mesh, camera, raws, out, "--latitude", "51.5", "--longitude", "-0.1") == 0
+    with pytest.warns(bd.BundleWarning, match="object_mesh"):
+        made = bd.read_bundle(out)
+    assert made.pixel_encoding == "linear" and list(made.times.hour) == [9, 13]
+    np.testing.assert_allclose(made.exposure, np.array([0.8, 0.4]) / 100 * 100 / 64)
+    pixels, top = made.read_frame(0)
+    assert pixels.dtype == np.uint16 and top == 65535
+    # the facets' values: 0.5 x gain of the white level (linear), the ratio the exposures'
+    curves = bd.facet_curves(made)
+    np.testing.assert_allclose(curves.luminance, [[0.4, 0.2]] * 3, rtol=0.003)
+    # a RAW file rawpy cannot decode, and RAW mixed with JPEG: one line each, exit 2
+    (raws / "IMG_2.NEF").write_bytes(b"\0" * 2048)
+    capsys.readouterr()
+    assert _make(mesh, camera, raws, tmp_path / "bad", "--utc-offset", "+00:00") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"photo '{raws / 'IMG_2.NEF'}': field 'file'" in err, err
+    assert "rawpy (LibRaw) cannot decode it" in err
+    (raws / "IMG_2.NEF").unlink()
+    write_photo(raws / "p.jpg", np.zeros((36, 48, 3)), "2024:06:21 12:00:00", "+01:00",
+                exposure=(1 / 125, 8.0, 100))  # fmt: skip
+    assert _make(mesh, camera, raws, tmp_path / "mixed", "--latitude", "51.5", "--longitude",
+                 "-0.1") == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "field 'pixel_encoding'" in err and "share one encoding" in err, err
