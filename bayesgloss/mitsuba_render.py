@@ -117,6 +117,7 @@ __all__ = [
     "frame_skies",
     "envmap_directions",
     "render_frames",
+    "rendered_horizontal_irradiance",
     "render_bundles",
     "mitsuba_albedos",
     "model_albedos",
@@ -629,43 +630,69 @@ def _write_meshes(config: sequences.SequenceConfig, facets, folder: Path) -> Non
     trimesh.Trimesh(v, f, process=False).export(folder / "ground.ply")
 
 
+def _sensor(config: sequences.SequenceConfig, facets, spp: int) -> dict:
+    """The pinhole camera of :func:`bayesgloss.sequences.camera_rays` as a Mitsuba sensor."""
+    mi = _mitsuba()
+    cam, fwd, _, up, tan_half = sequences._camera_frame(config, facets)
+    n = config.image_size
+    return {
+        "type": "perspective",
+        "fov": float(2 * np.degrees(np.arctan(tan_half))),
+        "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=[float(v) for v in cam],
+            target=[float(v) for v in cam + fwd],
+            up=[float(v) for v in up],
+        ),
+        "film": {
+            "type": "hdrfilm",
+            "width": n,
+            "height": n,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+        },
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    }
+
+
+def _sky_emitter(radiance: np.ndarray, weight: float = 1.0) -> dict:
+    """An ``envmap`` of grey radiance (H, W) on :func:`envmap_directions`' grid."""
+    mi = _mitsuba()
+    image = np.repeat(np.asarray(radiance, np.float32)[:, :, None], 3, axis=2)
+    return {
+        "type": "envmap",
+        "bitmap": mi.Bitmap(image),
+        "to_world": mi.ScalarTransform4f(_ENVMAP_TO_WORLD),
+        "sampling_weight": float(max(weight, 1e-9)),
+    }
+
+
+def _sun_emitter(sun_direction, solar_radiance: float, solid_angle: float, weight=1.0) -> dict:
+    """The sun disc (:func:`_sun_disc`) as a Mitsuba shape with an area emitter."""
+    mi = _mitsuba()
+    matrix, _ = _sun_disc(sun_direction, solid_angle)
+    return {
+        "type": "disk",
+        "to_world": mi.ScalarTransform4f(matrix.tolist()),
+        "bsdf": {"type": "diffuse", "reflectance": 0.0},
+        "emitter": {
+            "type": "area",
+            "radiance": {"type": "rgb", "value": float(solar_radiance)},
+            "sampling_weight": float(weight),
+        },
+    }
+
+
 def _scene_dict(
     config, facets, material: MitsubaMaterial, folder: Path, envmap, sun, spp: int
 ) -> dict:
     """Mitsuba scene dictionary of one frame; ``sun`` is (direction, radiance,
     solid angle, sampling weight) or None; ``envmap`` (H, W) radiance and its weight."""
-    mi = _mitsuba()
-    cam, fwd, right, up, tan_half = sequences._camera_frame(config, facets)
-    n = config.image_size
-    radiance, sky_weight = envmap
-    image = np.repeat(np.asarray(radiance, np.float32)[:, :, None], 3, axis=2)
     scene = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": MAX_DEPTH, "rr_depth": MAX_DEPTH + 1},
-        "sensor": {
-            "type": "perspective",
-            "fov": float(2 * np.degrees(np.arctan(tan_half))),
-            "fov_axis": "x",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=[float(v) for v in cam],
-                target=[float(v) for v in cam + fwd],
-                up=[float(v) for v in up],
-            ),
-            "film": {
-                "type": "hdrfilm",
-                "width": n,
-                "height": n,
-                "rfilter": {"type": "box"},
-                "pixel_format": "rgb",
-            },
-            "sampler": {"type": "independent", "sample_count": int(spp)},
-        },
-        "sky": {
-            "type": "envmap",
-            "bitmap": mi.Bitmap(image),
-            "to_world": mi.ScalarTransform4f(_ENVMAP_TO_WORLD),
-            "sampling_weight": float(max(sky_weight, 1e-9)),
-        },
+        "sensor": _sensor(config, facets, spp),
+        "sky": _sky_emitter(*envmap),
         "ground": {
             "type": "ply",
             "filename": str(folder / "ground.ply"),
@@ -680,19 +707,68 @@ def _scene_dict(
         },
     }
     if sun is not None:
-        direction, solar, omega, weight = sun
-        matrix, _ = _sun_disc(direction, omega)
-        scene["sun"] = {
-            "type": "disk",
-            "to_world": mi.ScalarTransform4f(matrix.tolist()),
-            "bsdf": {"type": "diffuse", "reflectance": 0.0},
-            "emitter": {
-                "type": "area",
-                "radiance": {"type": "rgb", "value": float(solar)},
-                "sampling_weight": float(weight),
-            },
-        }
+        scene["sun"] = _sun_emitter(*sun)
     return scene
+
+
+def rendered_horizontal_irradiance(
+    day: sky.DaylightSky, frame: int, *, sun: bool = True, sky_dome: bool = True, spp: int = 64
+) -> float:
+    """Irradiance on a horizontal plane as Mitsuba renders this module's sky and sun.
+
+    A white Lambertian square (2 x 2 m at the origin) seen from above by a
+    16 x 16 pixel camera, lit by the frame's sun disc (:func:`_sun_emitter`)
+    and/or sky envmap (:func:`_sky_emitter`); irradiance = pi x its mean
+    radiance. For the sun it should be ``solar_radiance x sun_solid_angle x
+    cos(zenith)``, the sky model's direct normal irradiance (Radiance units)
+    on the horizontal; for the sky :func:`bayesgloss.sky.horizontal_irradiance`
+    without the sun.
+
+    Parameters
+    ----------
+    day : DaylightSky
+    frame : int
+        Frame index [-].
+    sun, sky_dome : bool
+        Which emitters to include.
+    spp : int
+        Samples per pixel [-].
+
+    Returns
+    -------
+    float
+        Horizontal irradiance [W m^-2] (Radiance's units).
+    """
+    mi = _mitsuba()
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 4, "bsdf_samples": 4},
+        "sensor": {
+            "type": "perspective",
+            "fov": 10.0,
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0.0, 0.0, 3.0], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
+            ),
+            "film": {"type": "hdrfilm", "width": 16, "height": 16, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": int(spp)},
+        },
+        "plane": {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f().scale([2.0, 2.0, 1.0]),
+            "bsdf": {"type": "diffuse", "reflectance": 1.0},
+        },
+    }
+    if sun and day.solar_radiance[frame] > 0 and day.sun_direction[frame, 2] > 0:
+        scene["sun"] = _sun_emitter(
+            day.sun_direction[frame], float(day.solar_radiance[frame]), day.sun_solid_angle
+        )
+    if sky_dome:
+        radiance = day.radiance(envmap_directions().reshape(-1, 3))[:, frame]
+        scene["sky"] = _sky_emitter(radiance.reshape(ENVMAP_SIZE[1], ENVMAP_SIZE[0]))
+    if "sun" not in scene and "sky" not in scene:
+        return 0.0
+    image = np.asarray(mi.render(mi.load_dict(scene)), dtype=float)
+    return float(np.pi * np.mean(image[..., :3] @ _WEIGHTS))
 
 
 def render_frames(
