@@ -457,7 +457,11 @@ def _bundle_make(args: argparse.Namespace) -> int:
 
         middle = len(made.times) // 2  # a frame of the day's middle: the sun up
         manifest = json.loads((made.path / MANIFEST).read_text(encoding="utf-8"))
-        pixels, _ = read_image(made.path / manifest["frames"][middle]["file"])
+        pixels, top = read_image(made.path / manifest["frames"][middle]["file"])
+        if manifest["camera"]["pixel_encoding"] == "linear":  # RAW: sRGB's curve to look at
+            from .images import linear_to_srgb
+
+            pixels = linear_to_srgb(np.clip(pixels / float(top or np.max(pixels)), 0, 1))
         Image.fromarray(capture.label_overlay(pixels, made.labels)).save(args.overlay)
         print(f"labels over frame {middle}: {args.overlay}")
     print(
@@ -659,7 +663,8 @@ def _parser() -> argparse.ArgumentParser:
         required=True,
         nargs="+",
         metavar="DIR_OR_FILE",
-        help="photo files or folders of them (JPEG, PNG, TIFF)",
+        help="photo files or folders of them (JPEG, PNG, TIFF, or camera RAW: DNG, NEF, CR2, "
+        "CR3, ARW, RAF, ... decoded linearly with rawpy, pip install 'bayesgloss[raw]')",
     )
     mk.add_argument("--out", required=True, help="the bundle folder to write")
     mk.add_argument(
@@ -701,7 +706,7 @@ def _parser() -> argparse.ArgumentParser:
     mk.add_argument(
         "--pixel-encoding",
         default="srgb",
-        help="of PNG and TIFF photos (default: srgb; JPEGs are srgb)",
+        help="of PNG and TIFF photos (default: srgb; JPEGs are srgb, camera RAW linear)",
     )
     mk.add_argument(
         "--overlay",

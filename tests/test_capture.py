@@ -926,7 +926,9 @@ def test_bundle_make_from_raw_photos_is_linear(tmp_path, capsys):
                   when=f"2024:06:21 {hour}:00:00", offset="+01:00",
                   exposure=(gain / 100, 8.0, 100))  # fmt: skip
     out = tmp_path / "out"
-    assert _make(mesh, camera, raws, out, "--latitude", "51.5", "--longitude", "-0.1") == 0
+    overlay = tmp_path / "overlay.png"
+    assert _make(mesh, camera, raws, out, "--latitude", "51.5", "--longitude", "-0.1",
+                 "--overlay", str(overlay)) == 0  # fmt: skip
     with pytest.warns(bd.BundleWarning, match="object_mesh"):
         made = bd.read_bundle(out)
     assert made.pixel_encoding == "linear" and list(made.times.hour) == [9, 13]
@@ -936,6 +938,13 @@ def test_bundle_make_from_raw_photos_is_linear(tmp_path, capsys):
     # the facets' values: 0.5 x gain of the white level (linear), the ratio the exposures'
     curves = bd.facet_curves(made)
     np.testing.assert_allclose(curves.luminance, [[0.4, 0.2]] * 3, rtol=0.003)
+    # the overlay shows the linear frame through sRGB's curve: 0.2 of white (frame 1 of 2,
+    # the middle) is code 124 where no facet's colour lies over it
+    from PIL import Image
+
+    with Image.open(overlay) as img:
+        shown = np.asarray(img)
+    assert np.all(np.abs(shown[made.labels == 0].astype(int) - 124) <= 1)
     # a RAW file rawpy cannot decode, and RAW mixed with JPEG: one line each, exit 2
     (raws / "IMG_2.NEF").write_bytes(b"\0" * 2048)
     capsys.readouterr()
