@@ -552,8 +552,17 @@ def _plane_irradiance(normals, radiance, quad, resolution, chunk: int = 256) -> 
 _TERMS: list = []
 
 
-def _occlusion_terms(occ: Occlusion, sky, ground, ground_reflectance, quad):
-    """:func:`_occlusion_terms_of`, remembered for the same objects."""
+def _occlusion_terms(occ: Occlusion, sky, ground, ground_reflectance, quad, n_facets=None):
+    """:func:`_occlusion_terms_of`, remembered for the same objects.
+
+    ``n_facets``: the geometry's facet count, checked against the map's.
+    """
+    n_frames = len(np.atleast_2d(sky.sun_direction))
+    if occ.sunlit_fraction.shape != (len(occ) if n_facets is None else n_facets, n_frames):
+        raise ValueError(
+            f"occlusion is for {occ.sunlit_fraction.shape} facets x frames, the bases for "
+            f"{(n_facets, n_frames)}"
+        )
     for o, s, g, r, q, terms in _TERMS:
         if o is occ and s is sky and g == ground and r == ground_reflectance and q is quad:
             return terms
@@ -585,11 +594,6 @@ def _occlusion_terms_of(occ: Occlusion, sky, ground, ground_reflectance, quad):
             f"has {len(dirs)}: pass resolution={occ.resolution}"
         )
     sun, e_sun = _sun_terms(sky)
-    if occ.sunlit_fraction.shape != (n_f, len(sun)):
-        raise ValueError(
-            f"occlusion is for {occ.sunlit_fraction.shape} facets x frames, the bases for "
-            f"{(n_f, len(sun))}"
-        )
     g_key = occ.ground_facet.astype(np.int64) * n_k + occ.ground_cell
     h_key = occ.hit_facet.astype(np.int64) * n_k + occ.hit_cell
     keys = np.unique(np.concatenate([g_key, h_key]))
@@ -686,7 +690,9 @@ def diffuse_components(
     if occlusion is not None:
         from scipy.sparse import csr_matrix
 
-        open_, index, extra = _occlusion_terms(occlusion, sky, ground, ground_reflectance, quad)
+        open_, index, extra = _occlusion_terms(
+            occlusion, sky, ground, ground_reflectance, quad, len(geometry)
+        )
         sky_part = (weights * open_) @ radiance
         f, k = np.nonzero(index < len(extra) - 1)
         w = csr_matrix((weights[f, k], (f, index[f, k])), shape=(len(weights), len(extra)))
@@ -829,7 +835,8 @@ def glossy_basis(
     if occlusion is not None:
         occluder = None  # the mesh's ground shadow replaces the convex one
         res = occlusion.resolution
-        terms = _occlusion_terms(occlusion, sky, ground, ground_reflectance, sphere_quadrature(res))
+        quad = sphere_quadrature(res)
+        terms = _occlusion_terms(occlusion, sky, ground, ground_reflectance, quad, len(normal))
 
     out = np.empty((len(normal), len(n), len(sun)))
     for lo in range(0, len(normal), chunk):
@@ -906,7 +913,8 @@ def mirror_radiance(
     disc = np.where(in_disc, np.asarray(sky.solar_radiance, dtype=float), 0.0)
     if occlusion is not None:
         res = occlusion.resolution
-        terms = _occlusion_terms(occlusion, sky, ground, ground_reflectance, sphere_quadrature(res))
+        quad = sphere_quadrature(res)
+        terms = _occlusion_terms(occlusion, sky, ground, ground_reflectance, quad, len(mirror))
         radiance = _occluded(radiance, mirror, np.arange(len(mirror)), terms, res)
         disc = disc * occlusion.sunlit_fraction
     return radiance + disc
@@ -1127,7 +1135,12 @@ def ward_glossy_basis(
     if occlusion is not None:
         occluder = None  # the mesh's ground shadow replaces the convex one
         terms = _occlusion_terms(
-            occlusion, sky, ground, ground_reflectance, sphere_quadrature(occlusion.resolution)
+            occlusion,
+            sky,
+            ground,
+            ground_reflectance,
+            sphere_quadrature(occlusion.resolution),
+            len(geometry),
         )
     out = np.empty((len(normal), len(alpha), len(sun)))
     for lo in range(0, len(normal), chunk):

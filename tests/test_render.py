@@ -390,3 +390,260 @@ def test_ground_plane_and_object_shadow_agree_with_rtrace():
     np.testing.assert_allclose(model, ref, rtol=0.04)
     # and the shadow matters here: without it the ground is too bright by >10 %
     assert np.max(naive / ref - 1) > 0.10
+
+
+# --------------------------------------------------------------------------
+# A non-convex object: what its mesh hides from each facet (render.Occlusion)
+# --------------------------------------------------------------------------
+
+#: (zenith, azimuth) [deg] of the suns on the L building: three low morning suns
+#: that put the north wing's inner wall (and at 80 deg its roof) in the east
+#: wing's shadow, noon, afternoon, and an early sun north of east.
+L_SUNS = [(75.0, 100.0), (80.0, 120.0), (75.0, 130.0), (30.0, 180.0), (50.0, 240.0), (60.0, 80.0)]
+
+
+def _l_building():
+    """geometry.l_building's facets and its triangle mesh."""
+    trimesh = pytest.importorskip("trimesh")
+    from bayesgloss import geometry
+
+    facets = geometry.l_building()
+    vertices, faces, _ = geometry.triangles(facets)
+    return facets, trimesh.Trimesh(vertices, faces, process=False)
+
+
+def _oblique_views(normal):
+    """A view direction 40-odd degrees off each normal, toward its upper side."""
+    helper = np.where(np.abs(normal[:, 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    view = normal + 0.6 * helper + 0.3 * np.cross(normal, helper)
+    return view / np.linalg.norm(view, axis=1, keepdims=True)
+
+
+def _open_occlusion(n_facets, n_frames, resolution=3.0):
+    """An Occlusion that hides nothing: every direction open, every facet sunlit."""
+    k = len(render.sphere_quadrature(resolution)[0])
+    none = np.zeros(0, int)
+    return render.Occlusion(
+        open_fraction=np.ones((n_facets, k)),
+        sunlit_fraction=np.ones((n_facets, n_frames)),
+        resolution=resolution,
+        ground_facet=none,
+        ground_cell=none,
+        ground_lit=np.zeros((0, n_frames)),
+        ground_view=np.zeros(0),
+        hit_facet=none,
+        hit_cell=none,
+        hit_normal=np.zeros((0, 3)),
+        hit_sun=np.zeros((0, n_frames)),
+        hit_view=np.zeros(0),
+    )
+
+
+def test_quadrature_cell_finds_each_cell():
+    dirs, _ = render.sphere_quadrature(3.0)
+    np.testing.assert_array_equal(render.quadrature_cell(dirs), np.arange(len(dirs)))
+    # any direction lies in its cell's ring and within half a cell's width of its
+    # centre in azimuth; shapes broadcast
+    rng = np.random.default_rng(4)
+    d = _random_units(rng, 6000).reshape(20, 300, 3)
+    cell = render.quadrature_cell(d)
+    assert cell.shape == (20, 300)
+    c = dirs[cell]
+    theta, theta_c = np.degrees(np.arccos(d[..., 2])), np.degrees(np.arccos(c[..., 2]))
+    assert np.all(np.floor(theta / 3.0) == np.floor(theta_c / 3.0))
+    dphi = np.angle(
+        np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - np.arctan2(c[..., 1], c[..., 0])))
+    )
+    width = 2 * np.pi / np.round(2 * np.pi * np.hypot(c[..., 0], c[..., 1]) / np.radians(3.0))
+    assert np.all(np.abs(dphi) <= width / 2 + 1e-9)
+    # the poles and a direction at azimuth 2 pi
+    assert render.quadrature_cell([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]).tolist() == [
+        render.quadrature_cell([1e-9, 0.0, 1.0]),
+        len(dirs) - 4 + render.quadrature_cell([1e-9, 0.0, -1.0]) - (len(dirs) - 4),
+    ]
+
+
+def test_occlusion_that_hides_nothing_is_the_convex_model_bit_for_bit():
+    # the convex path is untouched by the occlusion code: an all-open, all-sunlit
+    # occlusion multiplies by 1.0 and adds 0.0, so the bases must be identical
+    from bayesgloss import sky
+
+    rng = np.random.default_rng(11)
+    g = _geometry(_random_units(rng, 12), _random_units(rng, 12) + [0, 0, 1.5])
+    g = ViewGeometry(g.normal, g.view_direction, rng.uniform(0, 2, (12, 3)))
+    day = sky.daylight("gensky-clear", render_sun([20.0, 45.0, 60.0, 80.0, 95.0], 130.0))
+    occ = _open_occlusion(12, 5)
+    for kwargs in ({}, {"lobe": "lafortune"}, {"ground": "sky"}):
+        a = render.facet_bases(g, day, **kwargs)
+        b = render.facet_bases(g, day, occlusion=occ, **kwargs)
+        c = render.facet_bases(g, day, occlusion=None, **kwargs)
+        for x, y in ((a, b), (a, c)):
+            np.testing.assert_array_equal(x.diffuse, y.diffuse)
+            np.testing.assert_array_equal(x.glossy, y.glossy)
+    np.testing.assert_array_equal(
+        render.ward_glossy_basis(g, day), render.ward_glossy_basis(g, day, occlusion=occ)
+    )
+    np.testing.assert_array_equal(
+        render.mirror_radiance(g, day), render.mirror_radiance(g, day, occlusion=occ)
+    )
+    # a map on another quadrature, or for other facets, is refused
+    with pytest.raises(ValueError, match="resolution=3.0"):
+        render.diffuse_basis(g, day, resolution=6.0, occlusion=occ)
+    with pytest.raises(ValueError, match="facets x frames"):
+        render.diffuse_basis(g, day, occlusion=_open_occlusion(11, 5))
+    with pytest.raises(ValueError, match="interreflection"):
+        occ.replace(interreflection="bounce")
+
+
+def test_occluded_bases_of_a_subset_are_the_subset_of_the_bases():
+    from bayesgloss import sky, visibility
+
+    facets, mesh = _l_building()
+    sun = np.array([render_sun(*s) for s in L_SUNS])
+    occ = visibility.occlusion(mesh, facets.normal, facets.center, sun)
+    g = ViewGeometry(facets.normal, _oblique_views(facets.normal), facets.center)
+    day = sky.daylight("gensky-clear", sun)
+    full = render.facet_bases(g, day, [1.0, 30.0, 1000.0], occlusion=occ)
+    pick = np.array([5, 1, 4])
+    sub = ViewGeometry(g.normal[pick], g.view_direction[pick], g.center[pick])
+    part = render.facet_bases(sub, day, [1.0, 30.0, 1000.0], occlusion=occ.take(pick))
+    np.testing.assert_allclose(part.diffuse, full.diffuse[pick], rtol=1e-12)
+    np.testing.assert_allclose(part.glossy, full.glossy[pick], rtol=1e-12)
+
+
+def render_sun(zenith, azimuth):
+    """Unit vector toward a sun at ``zenith`` and ``azimuth`` [deg]."""
+    from bayesgloss import sun
+
+    return sun.sun_direction(zenith, azimuth)
+
+
+def test_occluded_glossy_lobe_matches_the_sphere_quadrature_sum():
+    # The glossy basis looks each lobe node's direction up in the map's cells;
+    # the diffuse basis sums the cells as a matrix. Brute force: the lobe density
+    # summed over a fine ring grid (0.5 deg) with each direction's radiance
+    # taken from its cell's open fraction and blocked radiance, no sun, lobes of
+    # n 1, 5, 30 on the L building. With 32 x 2 nodes in u and 48 in azimuth
+    # the lobe quadrature converges to it (measured 0.8 %, tolerance 2 %). The
+    # default nodes (8 x 2, 12) miss it by up to 11 % (median 1.2 %), as they
+    # miss the convex model's own sum by up to 10 % on the same facets (a lobe
+    # across the sky-ground step at the horizon): the map's steps at cell edges
+    # add little to that (tolerance: 3 % more than the convex case's).
+    from bayesgloss import sky, visibility
+
+    facets, mesh = _l_building()
+    sun = np.array([render_sun(*s) for s in L_SUNS])
+    occ = visibility.occlusion(mesh, facets.normal, facets.center, sun, occluder_reflectance=0.5)
+    g = ViewGeometry(facets.normal, _oblique_views(facets.normal), facets.center)
+    day = sky.daylight("gensky-clear", sun, sun=False)  # the sky alone: no disc
+    exps = np.array([1.0, 5.0, 30.0])
+    terms = render._occlusion_terms(occ, day, "plane", 0.2, render.sphere_quadrature(3.0))
+    dirs, omega = render.sphere_quadrature(0.5)
+    radiance = render.incident_radiance(day, dirs)  # (K, T)
+
+    def ring_sum(occluded):
+        out = np.empty((len(facets), len(exps), len(sun)))
+        for f in range(len(facets)):
+            cos_a = np.clip(dirs @ g.mirror_direction[f], 0.0, 1.0)
+            above = (dirs @ g.normal[f]) > 0
+            seen = radiance
+            if occluded:
+                seen = render._occluded(radiance, dirs, np.full(len(dirs), f), terms, 3.0)
+            for j, n in enumerate(exps):
+                out[f, j] = ((n + 1) / (2 * np.pi) * cos_a**n * above * omega) @ seen
+        return out
+
+    def worst(lobe, ref):
+        big = ref > 1e-3 * ref.max()
+        return np.abs(lobe[big] / ref[big] - 1).max()
+
+    ref, ref_convex = ring_sum(True), ring_sum(False)
+    fine = worst(render.glossy_basis(g, day, exps, occlusion=occ, n_u=32, n_beta=48), ref)
+    default = worst(render.glossy_basis(g, day, exps, occlusion=occ), ref)
+    convex = worst(render.glossy_basis(g, day, exps), ref_convex)
+    print(f"occluded lobe vs ring sum: 32 x 48 nodes {fine:.4f}, default {default:.4f} "
+          f"(convex {convex:.4f})")  # fmt: skip
+    assert fine < 0.02
+    assert default < convex + 0.03
+
+
+@pytest.mark.radiance
+def test_occlusion_agrees_with_rtrace_on_an_l_building():
+    # geometry.l_building (the east wing 0.5 m above the north wing) on a ground
+    # plane of albedo 0.2 under gensky's clear sky with sun, six suns. Radiance:
+    # rtrace from just off each of the facet's 64 points (visibility.facet_points)
+    # back along the facet's view direction, averaged; -ab 3 (within 0.4 % of
+    # -ab 5 here; -ab 2 is 2.9 % short in the courtyard), no irradiance cache.
+    # The whole building is one plastic of colour 0.5: Lambertian (specularity 0)
+    # and glossy (specularity 0.08, roughness 0: a mirror part). The model: the
+    # mesh's occlusion with the building's albedo (0.5) for its faces.
+    # Measured (max |model / rtrace - 1|, Lambertian, glossy): sun-lit entries
+    # 2.0 %, 2.2 %; entries in another facet's shadow 3.4 %, 2.1 %; sun behind
+    # the facet 6.5 %, 4.9 %. Tolerances: the issue's 3 % and 10 %, the sun-behind
+    # entries 10 % too. Without the occlusion the shadowed entries are off by
+    # a factor 8; with black occluders (interreflection="none") the sun-lit ones
+    # by 15 %; with the ground's albedo (0.2) for the building's by 10 %.
+    from bayesgloss import radiance, sky, visibility
+
+    facets, mesh = _l_building()
+    sun = np.array([render_sun(*s) for s in L_SUNS])
+    occ = visibility.occlusion(mesh, facets.normal, facets.center, sun, occluder_reflectance=0.5)
+    faces = visibility.facet_faces(mesh, facets.normal, facets.center)
+    points, _ = visibility.facet_points(mesh, faces, len(facets))  # (F, 64, 3)
+    view = _oblique_views(facets.normal)
+    g = ViewGeometry(facets.normal, view, facets.center)
+    day = sky.daylight("gensky-clear", sun, ground_reflectance=0.2)
+    r = 200.0
+    ground = radiance.material("gnd", "plastic", 0.2, 0.0, 0.0) + radiance.polygons(
+        [np.array([[-r, -r, 0], [r, -r, 0], [r, r, 0], [-r, r, 0.0]])], "gnd", prefix="ground"
+    )
+    opts = ("-ab", "3", "-aa", "0", "-ad", "512", "-as", "256", "-lw", "1e-5", "-u-")
+    origins = (points + 1e-3 * view[:, None, :]).reshape(-1, 3)
+    rays = np.broadcast_to(-view[:, None, :], points.shape).reshape(-1, 3)
+
+    cos_sun = facets.normal @ sun.T
+    lit = occ.sunlit_fraction >= visibility.SUNLIT_MIN
+    shadowed = (occ.sunlit_fraction <= visibility.SHADOWED_MAX) & (cos_sun > 0)
+    behind = cos_sun <= 0
+    assert lit.sum() >= 20 and shadowed.sum() >= 3 and behind.sum() >= 10
+    figures = {}
+    for name, spec in (("lambertian", 0.0), ("glossy", 0.08)):
+        obj = radiance.material("mat", "plastic", 0.5, spec, 0.0)
+        obj += radiance.polygons(list(mesh.triangles), "mat")
+        ref = np.column_stack(
+            [
+                radiance.rtrace_scene(
+                    radiance.gensky_ang(s, "clear") + radiance.sky_glow() + ground + obj,
+                    origins,
+                    rays,
+                    opts,
+                )[:, 1]
+                .reshape(len(facets), -1)
+                .mean(1)
+                for s in sun
+            ]
+        )
+
+        def err(occlusion, spec=spec, ref=ref):
+            model = render.radiance_material_prediction(
+                g, day, "plastic", 0.5, spec, occlusion=occlusion
+            )
+            e = np.abs(model / ref - 1)
+            return e[lit].max(), e[shadowed].max(), e[behind].max()
+
+        figures[name] = {
+            "mesh": err(occ),
+            "black occluders": err(occ.replace(interreflection="none")),
+            "ground's albedo": err(occ.replace(occluder_reflectance=None)),
+            "convex": err(None),
+        }
+        lit_err, shadow_err, behind_err = figures[name]["mesh"]
+        assert lit_err < 0.03, (name, figures[name])
+        assert shadow_err < 0.10, (name, figures[name])
+        assert behind_err < 0.10, (name, figures[name])
+        # both parts matter: the shadow, and the light the building's faces reflect
+        assert figures[name]["convex"][1] > 1.0
+        assert figures[name]["black occluders"][0] > 0.10
+    for name, rows in figures.items():
+        for label, (a, b, c) in rows.items():
+            print(f"{name:10s} {label:16s} sun-lit {a:.3f} shadowed {b:.3f} sun behind {c:.3f}")
