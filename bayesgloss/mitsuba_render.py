@@ -48,8 +48,10 @@ diffuse components for light arriving along the normal and ``Y`` the bundle's
 luminance weights (0.265, 0.670, 0.065). :func:`mitsuba_albedos` integrates
 Mitsuba's own BSDF (``eval`` of one component on a quadrature over outgoing
 directions; ``sample`` for a delta component); :func:`model_albedos` computes
-the same from the formulas of the models Mitsuba implements (below); they
-agree within 0.2 % (tested). With ``F(c; eta)`` the unpolarised Fresnel
+the same from the formulas of the models Mitsuba implements (below); on
+seven materials of the four kinds they agree within 0.06 % in the albedos
+and 2e-4 in gamma (``tests/test_mitsuba_render.py``, tolerances 0.3 % and
+1e-3). With ``F(c; eta)`` the unpolarised Fresnel
 reflectance at incidence cosine c, ``F0 = ((eta - 1) / (eta + 1))^2``,
 ``rho`` the diffuse reflectance, ``w`` the blend weight of the conductor:
 
@@ -65,7 +67,11 @@ reflectance at incidence cosine c, ``F0 = ((eta - 1) / (eta + 1))^2``,
   2 t); ``R_d = rho T(1) eta^-2 (2 int_0^1 T(mu) mu dmu) / (1 - R_int)``, with
   ``T(mu)`` the rough interface's transmittance and ``R_int = 2 int_0^1
   R_i(mu) mu dmu`` its reflectance from inside (relative index 1 / eta),
-  both integrals over microfacet normals of the visible-normal density.
+  both integrals over microfacet normals of the visible-normal density;
+  ``R_int`` summed as ``roughplastic.cpp`` sums it (the mean of ``R_i(mu) mu``
+  over 64 equally spaced mu, doubled: 1-1.4 % below the integral, so its
+  ``R_d`` is 1.3-2.7 % below that of an exact integral, and 2 % below smooth
+  ``plastic``'s at alpha 0.002).
 - ``conductor`` blended: ``R_s = w F_c(1) = w ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2)``
   per channel (complex index n + ik), ``R_d = (1 - w) rho``.
 - ``roughconductor`` blended: ``R_s = w 2 pi int F_c(cos t) D(t) G1(2 t) cos t sin t dt``,
