@@ -371,6 +371,9 @@ def _arriving_radiance(
 # ---------------------------------------------------------------------------
 
 INTERREFLECTIONS = ("lambert", "none")
+#: Ring width of the grid on which the mesh's faces' irradiance is integrated, and
+#: of the cells their normals are rounded to (the centre of each) [deg].
+PLANE_RESOLUTION = 6.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -535,14 +538,15 @@ def quadrature_cell(directions, resolution: float = 3.0) -> np.ndarray:
 def _plane_irradiance(normals, radiance, quad, resolution, chunk: int = 256) -> np.ndarray:
     """Irradiance of planes of unit normals (H, 3) from radiance (K, T) on quad, (H, T).
 
-    Each normal is taken as the centre of its cell of ``quad`` (within about
-    ``resolution`` / 2 of it), so at most K plane integrals are computed.
+    Each normal is taken as the centre of its cell of ``sphere_quadrature(resolution)``
+    (within about ``resolution`` / 2 of it), so few plane integrals are computed.
     """
     dirs, omega = quad
+    centres = sphere_quadrature(resolution)[0]
     uniq, inverse = np.unique(quadrature_cell(normals, resolution), return_inverse=True)
     e = np.empty((len(uniq), radiance.shape[1]))
     for lo in range(0, len(uniq), chunk):
-        w = np.maximum(dirs[uniq[lo : lo + chunk]] @ dirs.T, 0.0) * omega
+        w = np.maximum(centres[uniq[lo : lo + chunk]] @ dirs.T, 0.0) * omega
         e[lo : lo + chunk] = w @ radiance
     return e[np.ravel(inverse)]
 
@@ -630,7 +634,12 @@ def _occlusion_terms_of(occ: Occlusion, sky, ground, ground_reflectance, quad):
         extra[row] -= open_g[:, None] * lost
     if lambert and len(h_key):
         # the blocked part: a Lambertian face lit by the sky and ground it sees and the sun
-        e_env = _plane_irradiance(occ.hit_normal, radiance, quad, occ.resolution)  # (H, T)
+        # the faces' irradiance from the unoccluded sky and ground, on a coarser grid
+        quad_e = sphere_quadrature(max(occ.resolution, PLANE_RESOLUTION))
+        rad_e = incident_radiance(
+            sky, quad_e[0], ground=ground, ground_reflectance=ground_reflectance, quadrature=quad
+        )
+        e_env = _plane_irradiance(occ.hit_normal, rad_e, quad_e, PLANE_RESOLUTION)  # (H, T)
         e_env *= seen(occ.hit_view, occ.hit_rays)
         e_dir = occ.hit_sun * e_sun
         row = np.searchsorted(keys, h_key)
