@@ -618,6 +618,31 @@ _BELOW_PLANE = 0.06
 _MIN_ELEVATION = 0.02
 
 
+def _cell_points(resolution: float, cells, n: int) -> np.ndarray:
+    """``n`` directions spread over each quadrature cell, (C, n, 3).
+
+    A fixed 2-D Halton set of ``n`` points, turned by a different amount in
+    each cell (Kronecker step by the cell's index), maps to the cell's height
+    range (uniform in z: equal solid angle) and azimuth range.
+    """
+    from .render import _rings
+
+    n_rings, n_phi, start = _rings(resolution)
+    cells = np.asarray(cells)
+    ring = np.searchsorted(start, cells, side="right") - 1
+    j = cells - start[ring]
+    edges = np.cos(np.linspace(0.0, np.pi, n_rings + 1))
+    z_hi, z_lo = edges[ring], edges[ring + 1]
+    width = 2 * np.pi / n_phi[ring]
+    phi_c = (j + 0.5 * (1 + ring % 2)) * width
+    shift = (cells[:, None] * np.array([0.7548776662, 0.5698402910])) % 1.0  # (C, 2)
+    u = (_halton(n, 2)[None] + shift[:, None]) % 1.0  # (C, n, 2)
+    z = z_lo[:, None] + u[..., 0] * (z_hi - z_lo)[:, None]
+    phi = phi_c[:, None] + (u[..., 1] - 0.5) * width[:, None]
+    r = np.sqrt(np.maximum(1.0 - z**2, 0.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+
+
 def _first_hits(mesh, origins, directions):
     """First face each ray meets: (hit (N,) bool, location (N, 3), face (N,) int)."""
     origins = np.ascontiguousarray(origins.reshape(-1, 3))
@@ -810,12 +835,15 @@ def occlusion(
     n_k, n_p = len(dirs), points.shape[1]
     cos = normal @ dirs.T  # (F, K)
     f_idx, k_idx = np.nonzero(cos > -_BELOW_PLANE)
-    # directions at or below the plane: tilted up to a small elevation above it
-    d = dirs[k_idx] + np.maximum(_MIN_ELEVATION - cos[f_idx, k_idx], 0.0)[:, None] * normal[f_idx]
+    # each ray along its own stratified point of the cell; those at or below the
+    # facet's plane tilted up to a small elevation above it
+    d = _cell_points(resolution, k_idx, n_sub)  # (C, S, 3)
+    up_n = normal[f_idx][:, None, :]
+    d = d + np.maximum(_MIN_ELEVATION - np.sum(d * up_n, -1), 0.0)[..., None] * up_n
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     which = (k_idx[:, None] * n_sub + np.arange(n_sub)) % n_p  # (C, S)
     origins = lifted[f_idx[:, None], which]  # (C, S, 3)
-    hit, loc, face = _first_hits(mesh, origins, np.broadcast_to(d[:, None], origins.shape))
+    hit, loc, face = _first_hits(mesh, origins, d)
     hit, loc, face = hit.reshape(-1, n_sub), loc.reshape(-1, n_sub, 3), face.reshape(-1, n_sub)
     open_fraction = np.ones((n_f, n_k))
     open_fraction[f_idx, k_idx] = 1.0 - hit.mean(1)
@@ -825,7 +853,7 @@ def occlusion(
     h = np.flatnonzero(hit.any(1))
     hc, hs = np.nonzero(hit[h])  # (blocked ray) -> (cell among h, sub-ray)
     h_normal = np.asarray(mesh.face_normals, dtype=float)[face[h][hc, hs]]
-    h_normal *= np.where(np.sum(h_normal * d[h][hc], -1) > 0, -1.0, 1.0)[:, None]
+    h_normal *= np.where(np.sum(h_normal * d[h][hc, hs], -1) > 0, -1.0, 1.0)[:, None]
     cos_sun = np.maximum(h_normal @ sun.T, 0.0) * sun_up  # (R, T)
     lit = _sees_sun(mesh, loc[h][hc, hs], h_normal, sun, cos_sun > 0)
     n_blocked = hit[h].sum(1)
@@ -841,10 +869,10 @@ def occlusion(
     np.add.at(mean_normal, hc, h_normal)
     mean_normal /= np.maximum(np.linalg.norm(mean_normal, axis=-1, keepdims=True), 1e-12)
     # downward cells with an open part: the ground points its open rays reach
-    g = np.flatnonzero((d[:, 2] < 0) & ~hit.all(1))
+    g = np.flatnonzero((dirs[k_idx, 2] < 0) & ~hit.all(1))
     gc, gs = np.nonzero(~hit[g])
-    start = origins[g][gc, gs]
-    g_loc = start - (start[:, 2:3] / d[g][gc, 2:3]) * d[g][gc]
+    start, ray = origins[g][gc, gs], d[g][gc, gs]
+    g_loc = start - (start[:, 2:3] / np.minimum(ray[:, 2:3], -1e-12)) * ray
     g_loc[:, 2] = 0.0
     up = np.broadcast_to([0.0, 0.0, 1.0], g_loc.shape)
     g_lit = _ground_sees_sun(mesh, g_loc, sun)

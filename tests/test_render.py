@@ -524,8 +524,8 @@ def test_occluded_glossy_lobe_matches_the_sphere_quadrature_sum():
     # summed over a fine ring grid (0.5 deg) with each direction's radiance
     # taken from its cell's open fraction and blocked radiance, no sun, lobes of
     # n 1, 5, 30 on the L building. With 32 x 2 nodes in u and 48 in azimuth
-    # the lobe quadrature converges to it (measured 0.8 %, tolerance 2 %). The
-    # default nodes (8 x 2, 12) miss it by up to 11 % (median 1.2 %), as they
+    # the lobe quadrature converges to it (measured 0.9 %, tolerance 2 %). The
+    # default nodes (8 x 2, 12) miss it by up to 12 % (median 1.2 %), as they
     # miss the convex model's own sum by up to 10 % on the same facets (a lobe
     # across the sky-ground step at the horizon): the map's steps at cell edges
     # add little to that (tolerance: 3 % more than the convex case's).
@@ -578,8 +578,8 @@ def test_occlusion_agrees_with_rtrace_on_an_l_building():
     # and glossy (specularity 0.08, roughness 0: a mirror part). The model: the
     # mesh's occlusion with the building's albedo (0.5) for its faces.
     # Measured (max |model / rtrace - 1|, Lambertian, glossy): sun-lit entries
-    # 2.0 %, 2.2 %; entries in another facet's shadow 3.4 %, 2.1 %; sun behind
-    # the facet 6.5 %, 4.9 %. Tolerances: the 3 % and 10 %, the sun-behind
+    # 2.0 %, 2.1 %; entries in another facet's shadow 3.2 %, 3.1 %; sun behind
+    # the facet 6.5 %, 5.7 %. Tolerances: the 3 % and 10 %, the sun-behind
     # entries 10 % too. Without the occlusion the shadowed entries are off by
     # a factor 8; with black occluders (interreflection="none") the sun-lit ones
     # by 15 %; with the ground's albedo (0.2) for the building's by 10 %.

@@ -353,3 +353,126 @@ def test_facet_faces_takes_the_piece_nearest_the_centre():
     sunk = trimesh.util.concatenate([a, box([3, 0, 0], [4, 2, 0.8])])
     face = vis.facet_faces(sunk, up[:1], [[0.5, 0.5, 1.0]])
     assert (face[12:] == -1).all() and (face[:12] == 0).sum() == 2
+
+
+# -- the forward model's map (visibility.occlusion) --------------------------------
+
+
+def _view_factor(occ, normal, upward=True):
+    """Cosine-weighted share of a facet's hemisphere the map leaves open (sky only or all)."""
+    from bayesgloss import render
+
+    dirs, omega = render.sphere_quadrature(occ.resolution)
+    w = np.maximum(dirs @ np.asarray(normal, float), 0.0) * omega / np.pi
+    if upward:
+        w = w * (dirs[:, 2] > 0)
+    return occ.open_fraction @ w
+
+
+def test_occlusion_map_gives_a_wall_and_a_courtyard_their_sky_view():
+    # The map on the sphere quadrature (8 rays a direction from the facet's
+    # points), weighted by cosine: the closed-form view factors of the sky test
+    # above (Hottel's crossed strings) to within 0.01 (the 3 deg cells and 8 of
+    # 64 points), and 1 where nothing hides anything.
+    flat = quad([0, 0, 0], [0, 0, 1], 0.1)
+    wall = box([-200, 1.0, 0], [200, 1.2, 1.0])
+    wall2 = box([-200, -1.2, 0], [200, -1.0, 1.0])
+    up, none = [[0.0, 0, 1]], np.zeros((0, 3))
+    open_ = vis.occlusion(flat, up, [[0, 0, 0]], none)
+    assert open_.open_fraction.min() == 1.0 and len(open_.hit_facet) == 0
+    one = vis.occlusion(trimesh.util.concatenate([flat, wall]), up, [[0, 0, 0]], none)
+    two = vis.occlusion(trimesh.util.concatenate([flat, wall, wall2]), up, [[0, 0, 0]], none)
+    # rays leave 1e-4 of the mesh's size (0.04 m on walls 400 m long) above the
+    # facet: the walls stand that much lower for it
+    h = 1.0 - vis.RAY_OFFSET * np.linalg.norm([400.0, 2.4, 1.0])
+    assert _view_factor(one, up[0])[0] == pytest.approx(wall_view(1.0, h), abs=0.005)
+    assert _view_factor(two, up[0])[0] == pytest.approx(2 * wall_view(1.0, h) - 1, abs=0.005)
+    # the blocked cells' faces are the walls' long sides (a few cells along the
+    # walls meet their far ends), turned toward the facet
+    n = two.hit_normal
+    assert np.mean(np.abs(n[:, 1]) > 0.99) > 0.95
+    from bayesgloss import render
+
+    d = render.sphere_quadrature(3.0)[0][two.hit_cell]
+    above = d[:, 2] > 0.06  # cells below the plane are cast tilted up into it
+    assert np.all(np.sum(n * d, -1)[above] < 0)
+    # the points met on a wall see the opposite wall, 2 m away and 1 m high: at
+    # half height, (sin atan(0.5 / 2) + sin atan(0.5 / 2)) / 2 = 0.243 of their
+    # view (crossed strings), so 0.757 open; 2 rays a point: a median near it
+    assert np.median(two.hit_view) == pytest.approx(0.757, abs=0.05)
+
+
+def test_mesh_shadow_on_the_ground_matches_a_box_shadow():
+    # visibility._ground_sees_sun rasterises the mesh's shadow on a 256 x 256
+    # grid over the box its bounding box casts; for a lone box the shadow is the
+    # convex hull of its corners cast along the sun (render.ground_shadow).
+    # Points farther than a grid cell from the shadow's edge must agree.
+    from bayesgloss import render
+
+    mesh = box([-0.5, -0.5, 0], [0.5, 0.5, 2.0])
+    suns = np.array([sun(60.0, 180.0), sun(30.0, 250.0), sun(15.0, 90.0), [0, 0, -1.0]])
+    rng = np.random.default_rng(5)
+    points = np.c_[rng.uniform(-8, 8, (20000, 2)), np.zeros(20000)]
+    lit = vis._ground_sees_sun(mesh, points, suns)
+    shadow = render.ground_shadow(points[:, :2], suns, mesh.vertices)
+    assert not lit[:, 3].any()  # the sun down: nothing lit
+    # the shadow's length is 2 m / tan(elevation), at most 7.5 m: the grid's cell
+    # is at most (7.5 + 1) / 256 = 0.033 m; points within 0.05 m of the edge may differ
+    differ = lit[:, :3] == shadow[:, :3]
+    assert differ.mean() < 0.002
+    inside = (np.abs(points[:, 0]) < 0.45) & (np.abs(points[:, 1]) < 0.45)
+    assert not lit[inside, :3].any()  # under the box: no sun
+
+
+def test_occlusion_sees_the_low_top_in_the_tall_box_shadow():
+    # the tall-and-low boxes: the low top is open to the sky but for the tall
+    # box's side; its sunlit fraction is facet_visibility's; its blocked
+    # directions meet the tall box's east face (at x = 0.5, facing +x, toward
+    # the low top east of it)
+    mesh = tall_and_low()
+    normal, center = LOW_TOP
+    suns = np.array([sun(*s) for s in SUNS])
+    occ = vis.occlusion(mesh, normal, center, suns)
+    v = vis.facet_visibility(mesh, normal, center, suns)
+    np.testing.assert_array_equal(occ.sunlit_fraction, v.sunlit_fraction)
+    assert 0.8 < _view_factor(occ, normal[0])[0] < 1.0
+    assert _view_factor(occ, normal[0])[0] == pytest.approx(v.sky_view_factor[0], abs=0.02)
+    blocked = occ.open_fraction[0] < 1
+    assert blocked.any() and np.allclose(occ.hit_normal, [1.0, 0, 0], atol=0.05)
+    # the tall box's east face is lit by an eastern sun and in shade under a western one
+    east, west = SUNS.index((60.0, 90.0)), SUNS.index((60.0, 270.0))
+    assert occ.hit_sun[:, east].mean() > 0.5 and occ.hit_sun[:, west].max() == 0.0
+    # the low top points up: its only downward cells are the ring just below
+    # the horizon (cast, tilted up, as a lobe's nodes may reach them)
+    from bayesgloss import render
+
+    dz = render.sphere_quadrature(3.0)[0][occ.ground_cell, 2]
+    assert np.all((dz < 0) & (dz > -0.06))
+
+
+def test_bundle_occlusion_is_cached_and_none_without_a_mesh(tmp_path):
+    from bayesgloss import bundle as bd
+
+    with_mesh = read(write_mesh_bundle(tmp_path, "mesh"))
+    without = read(write_mesh_bundle(tmp_path, "plain", with_mesh=False))
+    assert vis.bundle_occlusion(without) is None
+    t0 = time.perf_counter()
+    first = vis.bundle_occlusion(with_mesh)
+    t1 = time.perf_counter()
+    again = vis.bundle_occlusion(read(with_mesh.path))  # the same content, read anew
+    t2 = time.perf_counter()
+    assert again is first and t2 - t1 < (t1 - t0)
+    assert first.sunlit_fraction.shape == (4, len(TIMES))
+    np.testing.assert_array_equal(
+        first.sunlit_fraction, vis.bundle_visibility(with_mesh).sunlit_fraction
+    )
+    other = vis.bundle_occlusion(with_mesh, interreflection="none")
+    assert other is not first and other.interreflection == "none"
+    # a mesh changed on disk is a new map; a missing one a one-line error
+    (with_mesh.path / "object_mesh.obj").write_text(
+        (with_mesh.path / "object_mesh.obj").read_text() + "\n# changed\n"
+    )
+    assert vis.bundle_occlusion(with_mesh) is not first
+    (with_mesh.path / "object_mesh.obj").unlink()
+    with pytest.raises(bd.BundleError, match="field 'object_mesh': missing mesh"):
+        vis.bundle_occlusion(with_mesh)
