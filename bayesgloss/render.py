@@ -57,6 +57,39 @@ incident directions, the diffuse basis as a correction on a coarser grid
 below the horizon (gensky's and gendaylit's ground glow, as in a Radiance
 scene with no ground plane).
 
+Self-occlusion
+--------------
+A non-convex object (a bundle's ``object_mesh``) hides part of each facet's
+sky and ground and shadows it. With ``occlusion=`` (:class:`Occlusion`, made
+by :func:`bayesgloss.visibility.occlusion` from Embree ray casting: for each
+facet and each cell of :func:`sphere_quadrature`, rays from 8 of the facet's
+64 points, each through its own point of the cell) every basis here computes
+the radiance arriving from a direction in cell k as
+
+    open_fk L(d) + (1 - open_fk) L_mesh,fk(t),
+
+``open_fk`` the fraction of the cell's rays that leave without meeting the
+mesh (the diffuse basis sums the cells; a lobe or mirror direction takes its
+cell's values), and the direct sun times the facet's sunlit fraction. The
+open part of a downward cell sees the ground plane as lit by the sun in the
+share of its ground points that see the sun (the mesh's own shadow, in place
+of :func:`ground_shadow`'s convex one), and by the share of the sky those
+points see (cosine-weighted rays from each, weighted by the sky radiance of
+their directions). ``L_mesh`` (``interreflection="lambert"``, the default)
+is the radiance of the faces the blocked rays meet, taken as Lambertian of
+albedo ``occluder_reflectance`` (default: the ground's): rho / pi times their
+irradiance from the sky and ground they see (the same weighted share of the
+unoccluded plane's, over 1 - (1 - v) rho for the light their hidden view v
+sends back at their own radiance) plus the sun's where they are sunlit;
+``"none"`` leaves blocked directions black. One bounce of the mesh's light
+is so modelled, further bounces only by that closure; the faces' gloss is
+ignored. Against Radiance's rtrace on an L-shaped building of albedo 0.5
+(``tests/test_render.py``, -ab 3): sun-lit facets within 2.1 %, facets in
+another facet's shadow within 3.2 %, facets with the sun behind them within
+6.5 %; with black occluders 15 %, 10 %, 34 %; with the ground's albedo 0.2
+for the building's 10 %, 6 %, 21 %. ``occlusion=None`` is the convex model,
+bit for bit.
+
 Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 """
 
@@ -381,33 +414,21 @@ class Occlusion:
     """What a non-convex object's mesh hides from F facets over T frames.
 
     Made by :func:`bayesgloss.visibility.occlusion` (Embree ray casting); the
-    forward model's functions take it as ``occlusion=`` and then compute
-    (module docstring, "Self-occlusion")
-
-    * sky and ground radiance arriving from a direction in quadrature cell k
-      times ``open_fraction[f, k]``;
-    * the direct sun times ``sunlit_fraction[f, t]``;
-    * the ground seen through cell k lit by the sun only where the ground
-      point of a representative ray is sunlit (the mesh's shadow on the
-      ground, in place of :func:`ground_shadow`'s convex one);
-    * with ``interreflection="lambert"``, the blocked part of cell k the
-      radiance of the mesh face a representative ray meets there: a
-      Lambertian of albedo ``occluder_reflectance`` lit by the unoccluded sky
-      and ground plane and by the sun where that point is sunlit;
-      ``"none"``: blocked directions are black.
+    forward model's functions take it as ``occlusion=`` (module docstring,
+    "Self-occlusion").
 
     Attributes
     ----------
     open_fraction : ndarray (F, K)
-        Fraction of the facet's points whose ray along the centre of cell k
-        of ``sphere_quadrature(resolution)`` meets no face [-].
+        Fraction of the rays from the facet's points through cell k of
+        ``sphere_quadrature(resolution)`` that meet no face [-].
     sunlit_fraction : ndarray (F, T)
         Fraction of the facet's points that see the sun's centre; 0 with the
         sun down or behind the facet [-].
     resolution : float
         Ring width of the quadrature the map is on [deg].
     ground_facet, ground_cell : ndarray (G,) of int
-        Downward cells (with some open part) whose ground point was tested.
+        Downward cells with some open part.
     ground_lit : ndarray (G, T)
         Fraction of the cell's open rays whose ground point sees the sun [-].
     ground_view : ndarray (G,)
