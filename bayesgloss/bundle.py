@@ -929,9 +929,10 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         if not mesh.is_file():
             raise check.fail("object_mesh", f"missing mesh '{parsed.object_mesh}'")
         warnings.warn(
-            f"bundle '{path}': object_mesh '{parsed.object_mesh}' is used only to leave out "
-            "frames where the mesh shadows part or all of a facet (bayesgloss.visibility); "
-            "the sky and ground it hides are not yet modelled",
+            f"bundle '{path}': object_mesh '{parsed.object_mesh}' enters the forward model "
+            "(bayesgloss.visibility): the sun, sky and ground it hides from each facet; the "
+            "light its faces reflect is modelled as from a Lambertian of the ground's albedo, "
+            "and frames where it shadows part of a facet are left out",
             BundleWarning,
             stacklevel=2,
         )

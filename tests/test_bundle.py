@@ -1548,7 +1548,7 @@ def test_object_mesh_is_checked_and_its_use_said(tmp_path):
         with pytest.raises(bd.BundleError, match=problem):
             bd.read_bundle(path)
     (Path(path) / "mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    with pytest.warns(bd.BundleWarning, match="object_mesh 'mesh.obj' is used only to leave out"):
+    with pytest.warns(bd.BundleWarning, match="object_mesh 'mesh.obj' enters the forward model"):
         bd.read_bundle(path)
 
 
@@ -1560,7 +1560,7 @@ def test_writer_writes_exposure_and_object_mesh(tmp_path):
     exposure = [0.004 * (k + 1) for k in range(len(DAY_TIMES))]
     path, _ = _write(tmp_path, exposure=exposure, object_mesh=mesh)
     with pytest.warns(
-        bd.BundleWarning, match="object_mesh 'object_mesh.obj' is used only to leave out"
+        bd.BundleWarning, match="object_mesh 'object_mesh.obj' enters the forward model"
     ):
         b = bd.read_bundle(path)
     np.testing.assert_array_equal(b.exposure, exposure)

@@ -170,7 +170,7 @@ def test_bundle_make_remakes_the_renderers_bundle(rendered, capsys):
     seconds = time.perf_counter() - start
     assert code == 0, capsys.readouterr().err
     with pytest.warns(
-        bd.BundleWarning, match="object_mesh 'object_mesh.obj' is used only to leave out"
+        bd.BundleWarning, match="object_mesh 'object_mesh.obj' enters the forward model"
     ):
         made = bd.read_bundle(out)
     overlay = root / "overlay.png"
