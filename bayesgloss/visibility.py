@@ -98,8 +98,10 @@ which earlier versions set to leave out wholly shadowed entries, is no
 longer set.)
 
 Limitations: the mesh's faces reflect as Lambertian surfaces of one albedo
-(``occluder_reflectance``, the ground's unless given: 0.2 for a building of
-0.5 misplaced sun-lit courtyard walls by 10 % against rtrace), one bounce
+(``occluder_reflectance``, 0.5 unless given: 0.2 for a building of 0.5
+misplaced sun-lit courtyard walls by 10 % against rtrace, and made
+``estimate`` too glossy on two renders of the L building, 0.373 for 0.27
+and 0.735 for 0.67, where 0.5 held both truths), one bounce
 and a closure for the rest; the sky that the mesh hides from the ground
 plane is scaled by the share of radiance the ground points' rays see (2 of
 them a point); the map is on 3 deg cells, so a mirror-like lobe sees the
@@ -119,6 +121,7 @@ import numpy as np
 
 from . import bundle as bundle_io
 from .bundle import BundleError
+from .render import OCCLUDER_REFLECTANCE
 
 __all__ = [
     "CLASSES",
@@ -792,7 +795,7 @@ def occlusion(
     n_sub: int = N_SUB,
     n_view: int = N_VIEW,
     interreflection: str = "lambert",
-    occluder_reflectance: float | None = None,
+    occluder_reflectance: float = OCCLUDER_REFLECTANCE,
     angle_tolerance: float = ANGLE_TOLERANCE,
     plane_tolerance: float | None = None,
     ids=None,
@@ -827,8 +830,10 @@ def occlusion(
         Points per facet; rays per facet and direction.
     interreflection : {"lambert", "none"}
         Radiance of blocked directions (:class:`bayesgloss.render.Occlusion`).
-    occluder_reflectance : float, optional
-        Albedo of the mesh's faces for ``"lambert"`` [-]; None: the ground's.
+    occluder_reflectance : float
+        Albedo of the mesh's faces for ``"lambert"`` [-]
+        (:data:`bayesgloss.render.OCCLUDER_REFLECTANCE`, on which see
+        :mod:`bayesgloss.render`).
     angle_tolerance, plane_tolerance, ids
         As :func:`facet_visibility`.
 
