@@ -78,11 +78,10 @@ points see (cosine-weighted rays from each, weighted by the sky radiance of
 their directions). ``L_mesh`` (``interreflection="lambert"``, the default)
 is the radiance of the faces the blocked rays meet, taken as Lambertian of
 albedo ``occluder_reflectance`` (default :data:`OCCLUDER_REFLECTANCE`, 0.5):
-rho / pi times their
-irradiance from the sky and ground they see (the same weighted share of the
-unoccluded plane's, over 1 - (1 - v) rho for the light their hidden view v
-sends back at their own radiance) plus the sun's where they are sunlit;
-``"none"`` leaves blocked directions black. One bounce of the mesh's light
+rho / pi times their irradiance from the sky and ground they see (the same
+weighted share of the unoccluded plane's, over 1 - (1 - v) rho for the light
+their hidden view v sends back at their own radiance) plus the sun's where
+they are sunlit; ``"none"`` leaves blocked directions black. One bounce of the mesh's light
 is so modelled, further bounces only by that closure; the faces' gloss is
 ignored. Against Radiance's rtrace on an L-shaped building of albedo 0.5
 (``tests/test_render.py``, -ab 3): sun-lit facets within 2.1 %, facets in
@@ -94,8 +93,7 @@ painted, plastic and stone surfaces, within 0.3 of any of them. On two
 Radiance renders of the L building (gamma 0.27 and 0.67, total reflectance
 about 0.37 and 0.75) ``estimate``'s 90 % interval held the truth with 0.5
 and with each render's own value, and missed it with 0.2 (0.373 and 0.735,
-both too glossy). ``occlusion=None`` is the convex model,
-bit for bit.
+both too glossy). ``occlusion=None`` is the convex model, bit for bit.
 
 Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 """
