@@ -647,3 +647,35 @@ def test_occlusion_agrees_with_rtrace_on_an_l_building():
     for name, rows in figures.items():
         for label, (a, b, c) in rows.items():
             print(f"{name:10s} {label:16s} sun-lit {a:.3f} shadowed {b:.3f} sun behind {c:.3f}")
+
+
+def test_illumination_bases_pass_the_occlusion_through():
+    # illumination_bases hands occlusion= to every source's facet_bases and takes
+    # the object's shadow out of the sun's Fresnel term: the sun source's bases
+    # are render's with the occlusion, and the Fresnel sun term the convex one
+    # times the sunlit fraction; without it nothing changes
+    from bayesgloss import illumination as il
+    from bayesgloss import sky, visibility
+
+    facets, mesh = _l_building()
+    sun = np.array([render_sun(*s) for s in L_SUNS])
+    occ = visibility.occlusion(mesh, facets.normal, facets.center, sun)
+    g = ViewGeometry(facets.normal, _oblique_views(facets.normal), facets.center)
+    day = sky.daylight("gensky-clear", sun)
+    exps = [1.0, 100.0]
+    with_mesh = il.illumination_bases(g, day, exps, occlusion=occ)
+    convex = il.illumination_bases(g, day, exps)
+    sun_only, sky_only = il.split_sky(day)
+    for p, part in enumerate((sun_only, sky_only)):
+        ref = render.facet_bases(g, part, exps, occlusion=occ)
+        np.testing.assert_allclose(with_mesh.diffuse[p], ref.diffuse, rtol=1e-12)
+        np.testing.assert_allclose(with_mesh.glossy[p], ref.glossy, rtol=1e-12)
+    np.testing.assert_allclose(
+        with_mesh.fresnel.sun_direct, convex.fresnel.sun_direct * occ.sunlit_fraction
+    )
+    np.testing.assert_array_equal(with_mesh.fresnel.view, convex.fresnel.view)
+    # where the mesh shadows a facet the convex model has in sun, its sun is gone
+    shadowed = (occ.sunlit_fraction == 0) & (facets.normal @ sun.T > 0.1)
+    assert shadowed.any()
+    assert np.all(render.diffuse_components(g, sun_only)[1][shadowed] > 1.0)
+    assert np.all(render.diffuse_components(g, sun_only, occlusion=occ)[1][shadowed] == 0)

@@ -476,3 +476,38 @@ def test_bundle_occlusion_is_cached_and_none_without_a_mesh(tmp_path):
     (with_mesh.path / "object_mesh.obj").unlink()
     with pytest.raises(bd.BundleError, match="field 'object_mesh': missing mesh"):
         vis.bundle_occlusion(with_mesh)
+
+
+def test_joint_inputs_and_bundle_bases_use_the_mesh(tmp_path):
+    # estimate's forward model on a bundle with object_mesh is the mesh's: the
+    # joint model's sun basis loses the sun where the tall box shadows a facet
+    # the sun faces, and keeps it on the tall top that nothing shades; the
+    # fixed-brightness bases are render's with bundle_occlusion; without a mesh
+    # both are the convex model's
+    from bayesgloss import estimate, facets_estimate, joint_estimate, render, sky
+
+    b = read(write_mesh_bundle(tmp_path, "mesh"))
+    plain = read(write_mesh_bundle(tmp_path, "plain", with_mesh=False))
+    occ = vis.bundle_occlusion(b)
+    y, usable, censored = estimate.observations(estimate.bundle_curves(b))
+    every, keep = np.ones_like(usable), np.arange(4)  # all entries: the bases whole
+    none = np.zeros_like(censored)
+    data, used, _ = joint_estimate.joint_inputs(b, y, every, none, keep, "gensky-clear")
+    data0, used0, _ = joint_estimate.joint_inputs(plain, y, every, none, keep, "gensky-clear")
+    assert used.tolist() == used0.tolist()
+    sun = b.sun_direction[used]
+    shadowed = (occ.sunlit_fraction[:, used] == 0) & (b.facets.normal @ sun.T > 0.1)
+    assert shadowed.any()
+    assert np.all(data.diffuse[0][shadowed] < 0.2 * data0.diffuse[0][shadowed])
+    np.testing.assert_allclose(data.diffuse[0][1], data0.diffuse[0][1], rtol=1e-6)  # tall top
+    # the fixed-brightness path
+    day = sky.daylight("gensky-clear", b.sun_direction, ground_reflectance=b.ground_albedo)
+    rho = b.ground_albedo
+    np.testing.assert_array_equal(
+        facets_estimate.bundle_bases(b, "gensky-clear").diffuse,
+        render.facet_bases(b.view_geometry(), day, ground_reflectance=rho, occlusion=occ).diffuse,
+    )
+    np.testing.assert_array_equal(
+        facets_estimate.bundle_bases(plain, "gensky-clear").diffuse,
+        render.facet_bases(plain.view_geometry(), day, ground_reflectance=rho).diffuse,
+    )
