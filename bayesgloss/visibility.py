@@ -100,8 +100,9 @@ longer set.)
 Limitations: the mesh's faces reflect as Lambertian surfaces of one albedo
 (``occluder_reflectance``, 0.5 unless given: 0.2 for a building of 0.5
 misplaced sun-lit courtyard walls by 10 % against rtrace, and made
-``estimate`` too glossy on two renders of the L building, 0.373 for 0.27
-and 0.735 for 0.67, where 0.5 held both truths), one bounce
+``estimate`` too glossy on two renders of the L building, 0.373 for 0.270
+and 0.733 for 0.667, where 0.5 held both truths:
+``studies/occlusion_estimate.py``), one bounce
 and a closure for the rest; the sky that the mesh hides from the ground
 plane is scaled by the share of radiance the ground points' rays see (2 of
 them a point); the map is on 3 deg cells, so a mirror-like lobe sees the
