@@ -418,8 +418,8 @@ def test_mesh_shadow_on_the_ground_matches_a_box_shadow():
     assert not lit[:, 3].any()  # the sun down: nothing lit
     # the shadow's length is 2 m / tan(elevation), at most 7.5 m: the grid's cell
     # is at most (7.5 + 1) / 256 = 0.033 m; points within 0.05 m of the edge may differ
-    differ = lit[:, :3] == shadow[:, :3]
-    assert differ.mean() < 0.002
+    disagree = lit[:, :3] == shadow[:, :3]  # lit where the hull shadows, or the reverse
+    assert disagree.mean() < 0.002
     inside = (np.abs(points[:, 0]) < 0.45) & (np.abs(points[:, 1]) < 0.45)
     assert not lit[inside, :3].any()  # under the box: no sun
 
