@@ -319,7 +319,9 @@ def main(argv=None) -> list[Path]:
     out = Path(args.manifest)
     out.parent.mkdir(parents=True, exist_ok=True)
     old = json.loads(out.read_text()) if out.exists() else {}
-    data = manifest(items, cache)
+    measured = ("render_seconds", "render_threads", "rendered", "mc_noise")
+    kept = {k: old[k] for k in measured if k in old}  # a redraw keeps the measurements
+    data = manifest(items, cache, kept)
     out.write_text(json.dumps(data, indent=1) + "\n")
     print(json.dumps(data["composition"], indent=1))
     if args.draw_only:
@@ -329,11 +331,11 @@ def main(argv=None) -> list[Path]:
     paths = mr.render_bundles(items, cache, threads=args.threads)
     seconds = time.perf_counter() - start
     print(f"{len(paths)} bundles in {cache} ({seconds:.0f} s, {len(todo)} rendered)")
-    if len(todo) == len(items) or "render_seconds" not in old:
-        extra = {"render_seconds": round(seconds, 1), "render_threads": args.threads}
+    extra = dict(kept)
+    if len(todo) == len(items) or "render_seconds" not in kept:
+        extra.update(render_seconds=round(seconds, 1), render_threads=args.threads)
         extra["rendered"] = len(todo)
-    else:  # the timed run rendered the set; keep its time
-        extra = {k: old[k] for k in ("render_seconds", "render_threads", "rendered") if k in old}
+    # else: the timed run rendered the set; its time is kept
     if not args.no_noise_check:
         extra["mc_noise"] = noise_check(items, cfg, args.threads)
         print(json.dumps(extra["mc_noise"]["all"], indent=1))
