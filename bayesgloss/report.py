@@ -206,6 +206,9 @@ def posterior_report(
         )
     ax.set(xlabel="gamma [-]", ylabel="facets", title="(d) object gloss", xlim=(0, 1))
     ax.legend(fontsize=8, loc="upper center")
+    weights = _model_weights(summary)
+    if weights:  # the stacked sky and lobe families' weights
+        ax.text(0.02, 0.02, weights, transform=ax.transAxes, fontsize=7, va="bottom", ha="left")
 
     # (e) three facets: the least and most glossy and the middle one, with bands
     order = np.argsort(med)
@@ -254,6 +257,19 @@ def posterior_report(
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def _model_weights(summary) -> str:
+    """Lines of the stacking weights of the sky families and the lobe families
+    (``estimate``'s ``sky_families`` and ``lobe_families``), empty where none."""
+    lines = []
+    sky = summary.get("sky_families", {}).get("families")
+    if sky:
+        lines.append("sky: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in sky.items()))
+    lobes = summary.get("lobe_families")
+    if lobes:
+        lines.append("lobe: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in lobes.items()))
+    return "\n".join(lines)
 
 
 def _illumination_panel(ax, idata) -> None:

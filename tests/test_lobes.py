@@ -193,3 +193,22 @@ def test_ggx_basis_sees_what_the_mesh_hides():
         lobes.ggx_glossy_basis(g, day, [0.1, 0.5], occlusion=open_),
         lobes.ggx_glossy_basis(g, day, [0.1, 0.5]),
     )
+
+
+def test_report_names_the_stacked_families_weights():
+    from bayesgloss import report
+
+    summary = {
+        "sky_families": {"families": {"auto": {"weight": 0.25}, "gensky-clear": {"weight": 0.75}}},
+        "lobe_families": {
+            "phong": {"weight": 0.0},
+            "ward": {"weight": 0.9},
+            "ggx": {"weight": 0.1},
+        },
+    }
+    text = report._model_weights(summary)
+    assert text.splitlines() == [
+        "sky: auto 0.25, gensky-clear 0.75",
+        "lobe: phong 0.00, ward 0.90, ggx 0.10",
+    ]
+    assert report._model_weights({}) == ""
