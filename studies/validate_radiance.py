@@ -88,6 +88,49 @@ def material_class(truth: dict) -> str | None:
     return f"{smooth}-{truth['material']}"
 
 
+def calibration_figure(scores: list[dict], path: Path, methods) -> dict | None:
+    """Nominal against observed coverage of the central intervals of the
+    object's gamma, per material class, from each score's ``pit`` (the
+    posterior CDF at the truth; a central interval of level c holds the
+    truth where |pit - 0.5| <= c / 2); direct-sun sequences. None where no
+    score has one."""
+    rows = [s for s in scores if s["direct_sun"] and s.get("class")]
+    levels = np.linspace(0.1, 0.9, 9)
+    out = {}
+    for m in methods:
+        for cls in sorted({s["class"] for s in rows}):
+            pits = [
+                s[m]["pit"]
+                for s in rows
+                if s["class"] == cls and s.get(m, {}).get("pit") is not None
+            ]
+            if pits:
+                dist = np.abs(np.asarray(pits) - 0.5)
+                out.setdefault(m, {})[cls] = {
+                    "n": len(pits),
+                    "observed": [float(np.mean(dist <= c / 2)) for c in levels],
+                }
+    if not out:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(out), figsize=(4.2 * len(out), 4.2), squeeze=False)
+    for ax, (m, classes) in zip(axes[0], out.items(), strict=True):
+        for cls, row in classes.items():
+            ax.plot(levels, row["observed"], "o-", ms=3, label=f"{cls} ({row['n']})")
+        ax.plot([0, 1], [0, 1], "k:", lw=0.8)
+        ax.set(xlabel="nominal coverage", ylabel="observed coverage", title=m, xlim=(0, 1))
+        ax.set_ylim(0, 1)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"levels": levels.tolist(), **out}
+
+
 def class_table(scores: list[dict]) -> dict:
     """Per material class and method: MAE and 90 % coverage (the reported
     interval) on direct-sun sequences."""
@@ -145,8 +188,14 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         t0 = time.perf_counter()
         res = estimate.estimate_bundle(b, **kwargs, sampler_options={"max_steps": max_sweeps})
         obj = res.summary["object"]
+        post = res.idata.posterior
+        draws = post["gamma_object"] if "gamma_object" in post else None
         out[name] = {
             **{k: obj["gamma"][k] for k in ("median", "q05", "q95", "hdi90")},
+            # the posterior's CDF at the truth (for calibration at every level)
+            "pit": None
+            if draws is None or truth.get("gloss") is None
+            else float(np.mean(draws.values < truth["gloss"])),
             "flags": obj.get("flags", []),
             "model": res.summary["sampler"]["model"],
             "illumination": res.summary["illumination"],
@@ -414,6 +463,10 @@ def main(argv=None) -> None:
     run = [m for m in METHODS if any(m in s for s in scores)]
     title = "Mitsuba validation set" if args.set == "mitsuba_set" else "Radiance validation set"
     figure(scores, RESULTS / f"{name}.png", run, title)
+    calibration = calibration_figure(scores, RESULTS / f"{name}_calibration.png", run)
+    if calibration is not None:
+        summary["calibration"] = calibration
+        (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
     for cat, row in summary["table"].items():
         print(cat, json.dumps(row))
 
