@@ -335,9 +335,9 @@ def figure(
         ax.set_ylim(-0.05, 1.05)
     axes[0].set_ylabel("object gamma (median, 90 % interval)")
     handles = [plt.Line2D([], [], color=colours[c], marker="o", ls="") for c in cats]
-    fig.legend(handles, cats, loc="lower center", ncol=len(cats), fontsize=8)
+    fig.legend(handles, cats, loc="lower center", ncol=min(len(cats), 2 * len(methods)), fontsize=8)
     fig.suptitle(f"{title}: o direct sun, x overcast")
-    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
+    fig.tight_layout(rect=(0, 0.14 if len(methods) < 4 else 0.08, 1, 0.95))
     fig.savefig(path, dpi=120)
 
 
