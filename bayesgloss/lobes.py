@@ -249,67 +249,38 @@ def ggx_glossy_basis(
     if np.any(~np.isfinite(alpha)) or np.any(alpha <= 0):
         raise ValueError(f"roughness must be finite and > 0, got {roughness}")
     render._check_ground(ground)
-    normal = geometry.normal
-    view = np.asarray(geometry.view_direction, dtype=float)
-    t1, t2 = render._orthonormal_frame(normal)
     cd, w_u = _ggx_nodes(alpha, n_u)  # (N, U), (U,)
     sd = np.sqrt(np.maximum(1.0 - cd**2, 0.0))
-    phi = (np.arange(n_phi) + 0.5) * (2 * np.pi / n_phi)
     albedo = ggx_normal_albedo(alpha)  # (N,)
-    quad = render.sphere_quadrature()
-    sun, e_sun = render._sun_terms(sky)
-    occluder = geometry.occluder
-    if occlusion is not None:
-        occluder = None  # the mesh's ground shadow replaces the convex one
-        terms = render._occlusion_terms(
-            occlusion,
-            sky,
-            ground,
-            ground_reflectance,
-            render.sphere_quadrature(occlusion.resolution),
-        )
-    out = np.empty((len(normal), len(alpha), len(sun)))
-    for lo in range(0, len(normal), chunk):
-        sl = slice(lo, lo + chunk)
-        n_, o_ = normal[sl], view[sl]
-        tang = np.cos(phi)[:, None] * t1[sl][:, None, :] + np.sin(phi)[:, None] * t2[sl][:, None, :]
-        h = (
-            cd[None, :, :, None, None] * n_[:, None, None, None, :]
-            + sd[None, :, :, None, None] * tang[:, None, None, :, :]
-        )  # (C, N, U, Phi, 3)
-        ho = np.einsum("cnupk,ck->cnup", h, o_)
-        inc = 2.0 * ho[..., None] * h - o_[:, None, None, None, :]
-        cos_i = np.einsum("cnupk,ck->cnup", inc, n_)
-        cos_o = np.einsum("ck,ck->c", o_, n_)[:, None, None, None]  # (C, 1, 1, 1)
-        a = alpha[None, :, None, None]
+    a = alpha[None, :, None, None]
+
+    def weight_of(cos_i, ho, cos_o):
         g = smith_ggx_g1(cos_i, a) * smith_ggx_g1(np.broadcast_to(cos_o, cos_i.shape), a)
         ok = (cos_i > 0) & (ho > 0) & (cos_o > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            weight = np.where(ok, g * ho / (cd[None, :, :, None] * cos_o), 0.0)
-        weight *= (w_u[None, None, :, None] / n_phi) / albedo[None, :, None, None]
-        centers = None if geometry.center is None else geometry.center[sl, None, None, None, :]
-        radiance = render._arriving_radiance(
-            sky,
-            centers,
-            inc,
-            occluder,
-            ground=ground,
-            ground_reflectance=ground_reflectance,
-            quadrature=quad,
-        )  # (C, N, U, Phi, T)
-        if occlusion is not None:
-            facet = np.arange(lo, lo + len(inc))[:, None, None, None]
-            radiance = render._occluded(radiance, inc, facet, terms, occlusion.resolution)
-        out[sl] = np.einsum("cnup,cnupk->cnk", weight, radiance)
-        # the sun as a point source: f(sun, o) cos(theta_s) E_sun / A
-        f_sun = ggx_smith(
+            return np.where(ok, g * ho / (cd[None, :, :, None] * cos_o), 0.0)
+
+    def sun_brdf(sun, o_, n_):  # f(sun, o) / A
+        f = ggx_smith(
             sun[None, None, :, :], o_[:, None, None, :], n_[:, None, None, :], alpha[None, :, None]
         )  # (C, N, T)
-        cos_s = np.maximum(n_ @ sun.T, 0.0)[:, None, :]
-        if occlusion is not None:
-            cos_s = cos_s * occlusion.sunlit_fraction[sl, None, :]
-        out[sl] += f_sun * cos_s * e_sun[None, None, :] / albedo[None, :, None]
-    return out
+        return f / albedo[None, :, None]
+
+    node_weight = (w_u[None, :] / n_phi) / albedo[:, None]
+    return render.half_vector_basis(
+        geometry,
+        sky,
+        cd,
+        sd,
+        node_weight,
+        weight_of,
+        sun_brdf,
+        n_phi=n_phi,
+        ground=ground,
+        ground_reflectance=ground_reflectance,
+        chunk=chunk,
+        occlusion=occlusion,
+    )
 
 
 def glossy_basis(
