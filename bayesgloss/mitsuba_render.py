@@ -94,8 +94,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import shutil
 import sys
 import tempfile
 import time
@@ -105,7 +103,7 @@ from pathlib import Path
 import numpy as np
 
 from . import bundle as bundle_io
-from . import images, reflectance, sequences, sky
+from . import reflectance, sequences, sky
 
 __all__ = [
     "MATERIAL_KINDS",
@@ -941,43 +939,10 @@ def write_sequence_bundle(path, sequence: MitsubaSequence, frames: np.ndarray) -
     config = sequence.config
     facets = config.facets()
     labels = sequences.label_image(config, facets)
-    present = np.isin(facets.ids, np.unique(labels[labels > 0]))
     sun_up = config.sun_directions()[:, 2] > 0.0
-    coded, gains, white = sequences.camera_response(config, frames, sun_up)
-    name, _ = images.parse_pixel_encoding(config.pixel_encoding)
-    if name == "linear-radiance":
-        frame_format = "hdr"
-    else:
-        frame_format = "png8" if config._bit_depth() == 8 else "png16"
-    truth = sequence.truth()
-    truth["exposure"] = None if gains is None else [float(g) for g in gains]
-    truth["exposure_written"] = gains is not None and name == "linear-radiance"
-    truth["white"] = white
-    final = Path(path)
-    staging = final.with_name(f".{final.name}.staging")
-    bundle_io.write_bundle(
-        staging,
-        site={
-            "latitude": config.latitude,
-            "longitude": config.longitude,
-            "elevation": config.elevation,
-        },
-        camera_position=config.camera_position(),
-        pixel_encoding=config.pixel_encoding,
-        frames=list(coded),
-        times=[t.isoformat() for t in config.frame_times()],
-        facets=facets.subset(np.flatnonzero(present)),
-        labels=labels,
-        ground_reflectance=config.ground_reflectance,
-        truth=truth,
-        frame_format=frame_format,
-        overwrite=True,
-        exposure=list(truth["exposure"]) if truth["exposure_written"] else None,
+    return sequences.write_rendered_bundle(
+        Path(path), config, facets, labels, frames, sun_up, bundle_io, sequence.truth()
     )
-    if final.exists():
-        shutil.rmtree(final)
-    os.replace(staging, final)
-    return final
 
 
 def render_bundles(items, cache_dir, *, threads: int = 2, progress: bool = True) -> list[Path]:

@@ -958,48 +958,59 @@ def _write_group(plan, cache_dir: Path, bundle_io) -> None:
     for i, config in enumerate(plan["members"]):
         n = config.image_size
         labels = label_image(config, facets)
-        present = np.isin(facets.ids, np.unique(labels[labels > 0]))
         frames = np.stack([f[offsets[i] : offsets[i + 1]].reshape(n, n, 3) for f in plan["frames"]])
-        coded, gains, white = camera_response(config, frames, sun_up)
-        name, _ = images.parse_pixel_encoding(config.pixel_encoding)
-        if name == "linear-radiance":
-            frame_format = "hdr"
-        else:
-            frame_format = "png8" if config._bit_depth() == 8 else "png16"
-        truth = config.bundle_truth()
-        truth["exposure"] = None if gains is None else [float(g) for g in gains]
-        truth["exposure_written"] = gains is not None and name == "linear-radiance"
-        truth["white"] = white
-        final = _bundle_dir(cache_dir, config)
-        staging = final.with_name(f".{final.name}.staging")
-        bundle_io.write_bundle(
-            staging,
-            site={
-                "latitude": config.latitude,
-                "longitude": config.longitude,
-                "elevation": config.elevation,
-            },
-            camera_position=config.camera_position(),
-            pixel_encoding=config.pixel_encoding,
-            frames=list(coded),
-            times=[t.isoformat() for t in config.frame_times()],
-            facets=facets.subset(np.flatnonzero(present)),
-            labels=labels,
-            ground_reflectance=config.ground_reflectance,
-            truth=truth,
-            frame_format=frame_format,
-            object_mesh=config.mesh_file,  # None but for shape "mesh"
-            overwrite=True,
+        write_rendered_bundle(
+            _bundle_dir(cache_dir, config), config, facets, labels, frames, sun_up, bundle_io
         )
-        if truth["exposure_written"]:  # pixel = exposure x radiance (the spec's frames[].exposure)
-            manifest_path = staging / bundle_io.MANIFEST
-            manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
-            for frame, gain in zip(manifest["frames"], truth["exposure"], strict=True):
-                frame["exposure"] = gain
-            manifest_path.write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
-        if final.exists():  # a bundle left without its manifest by an old interrupted run
-            shutil.rmtree(final)
-        os.replace(staging, final)
+
+
+def write_rendered_bundle(
+    final: Path, config: SequenceConfig, facets, labels, frames, sun_up, bundle_io, truth=None
+) -> Path:
+    """Rendered radiance frames (T, n, n, 3) as a bundle at ``final``: the
+    camera response of ``config`` (:func:`camera_response`), the facets its
+    ``labels`` hold, ``truth`` (default :meth:`SequenceConfig.bundle_truth`)
+    with the exposure gains and white level added, ``frames[].exposure``
+    written for ``linear-radiance`` only; staged and renamed into place. The
+    writer of the Radiance renderer and of :mod:`bayesgloss.mitsuba_render`."""
+    present = np.isin(facets.ids, np.unique(labels[labels > 0]))
+    coded, gains, white = camera_response(config, frames, sun_up)
+    name, _ = images.parse_pixel_encoding(config.pixel_encoding)
+    if name == "linear-radiance":
+        frame_format = "hdr"
+    else:
+        frame_format = "png8" if config._bit_depth() == 8 else "png16"
+    truth = config.bundle_truth() if truth is None else truth
+    truth["exposure"] = None if gains is None else [float(g) for g in gains]
+    truth["exposure_written"] = gains is not None and name == "linear-radiance"
+    truth["white"] = white
+    final = Path(final)
+    staging = final.with_name(f".{final.name}.staging")
+    bundle_io.write_bundle(
+        staging,
+        site={
+            "latitude": config.latitude,
+            "longitude": config.longitude,
+            "elevation": config.elevation,
+        },
+        camera_position=config.camera_position(),
+        pixel_encoding=config.pixel_encoding,
+        frames=list(coded),
+        times=[t.isoformat() for t in config.frame_times()],
+        facets=facets.subset(np.flatnonzero(present)),
+        labels=labels,
+        ground_reflectance=config.ground_reflectance,
+        truth=truth,
+        frame_format=frame_format,
+        object_mesh=config.mesh_file,  # None but for shape "mesh"
+        overwrite=True,
+        # pixel = exposure x radiance (the spec's frames[].exposure)
+        exposure=truth["exposure"] if truth["exposure_written"] else None,
+    )
+    if final.exists():  # a bundle left without its manifest by an old interrupted run
+        shutil.rmtree(final)
+    os.replace(staging, final)
+    return final
 
 
 # -- camera response -----------------------------------------------------------
