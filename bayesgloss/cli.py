@@ -279,6 +279,12 @@ def _print_estimate(name, summary) -> None:
         f"object gamma {g['median']:.3f} [90 %: {_interval(g)}], "
         f"{o['facets_converged']}/{o['facets']} facets converged"
     )
+    if "gamma_within_model" in o:  # the interval is the model's plus its error
+        e = o["model_error"]
+        print(
+            f"  within the model [90 %: {_interval(o['gamma_within_model'])}]; model error sd "
+            f"{e['sd']:.3f} (floor {e['floor']:.3f}, facets' disagreement {e['facets_sd']:.3f})"
+        )
     if "sky_families" in summary:  # the stacked day-level sky families
         fam = summary["sky_families"]["families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())

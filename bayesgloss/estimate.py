@@ -61,8 +61,15 @@ no facet has them (every frame at night, a single frame, every pixel
 saturated) is rejected with :class:`bayesgloss.bundle.NoUsableData`, which
 says how many frames have the sun up and how many entries saturate.
 
+The reported gamma of the object and of each facet carries the model's
+error of the material's gloss (:mod:`bayesgloss.model_error`: the facets'
+disagreement and a floor measured on renders); the model's own posterior
+is beside it as ``gamma_within_model`` (the one SBC checks), and the
+object's draws with the error are ``gamma_material`` in the InferenceData.
+
 Flags of the summary: a facet ``not-converged``, ``gloss-not-identifiable``
-(90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`),
+(the model's own 90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`:
+what the data tell, the model's error aside),
 ``mostly-saturated`` (more than half its usable entries are lower bounds),
 or, left out, ``too-few-frames`` or ``saturated`` (too few measured
 entries); the object the same, ``mostly-saturated`` over the facets used.
@@ -87,6 +94,7 @@ from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_i
 from .fresnel import check_fresnel_model
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
+from .model_error import model_error_sd, with_model_error
 from .irradiance import measured_sky
 from .joint_estimate import (
     DEFAULT_FRESNEL,
@@ -203,6 +211,10 @@ def convergence(idata, facet_runs=None) -> dict:
 #: The posterior of gamma of a facet or object is "not identifiable" when its
 #: 90 % interval is wider than this (the prior's is 0.9).
 NOT_IDENTIFIABLE_WIDTH = 0.6
+
+#: The random stream of the model error's draws (with the run's seed:
+#: ``default_rng([seed, MODEL_ERROR_STREAM])``), apart from the samplers'.
+MODEL_ERROR_STREAM = 7
 
 
 def _camera(b, camera: str) -> str:
@@ -416,11 +428,16 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
     _, usable, censored = observations(curves)
     # kept facets whose usable entries are mostly lower bounds
     mostly_saturated = censored[keep].sum(1) > 0.5 * usable[keep].sum(1)
+    # the model's error of the material's gloss (bayesgloss.model_error), from
+    # the facets' disagreement and the floor no disagreement shows
+    error = model_error_sd(per_facet.mean(axis=1), per_facet.std(axis=1))
+    rng = np.random.default_rng([seed, MODEL_ERROR_STREAM])
     facets = []
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
-        gq = _quantiles(per_facet[k], GAMMA_BOUNDS)
-        if _width(gq) > NOT_IDENTIFIABLE_WIDTH:
+        within = _quantiles(per_facet[k], GAMMA_BOUNDS)
+        gq = _quantiles(with_model_error(per_facet[k], error["sd"], rng), GAMMA_BOUNDS)
+        if _width(within) > NOT_IDENTIFIABLE_WIDTH:  # what the data tell, not the model's error
             flags.append("gloss-not-identifiable")
         if mostly_saturated[k]:
             flags.append("mostly-saturated")
@@ -428,6 +445,7 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
             {
                 "id": int(fid),
                 "gamma": gq,
+                "gamma_within_model": within,
                 "n": _quantiles(idata.posterior["n"].values[..., k]),
                 "converged": bool(diag["converged"][k]),
                 "rhat": float(diag["rhat"][k]),
@@ -454,21 +472,28 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data_priors
     )
     if "gamma_object" in idata.posterior:  # the one-material model's own answer
-        obj_q = _quantiles(idata.posterior["gamma_object"].values, GAMMA_BOUNDS)
+        object_draws = idata.posterior["gamma_object"].values
         obj_converged = bool(samples.converged) and len(ids) > 0
         model = "one material (shared gamma and n, hierarchical albedo, per-frame light)"
     else:
-        obj_q = _quantiles(pop["mu"], GAMMA_BOUNDS)
+        object_draws = np.asarray(pop["mu"])
         obj_converged = bool(np.all(conv)) and len(ids) > 0
         model = "population (hierarchical Beta)"
+    obj_within = _quantiles(object_draws, GAMMA_BOUNDS)
+    material = with_model_error(object_draws, error["sd"], rng)
+    obj_q = _quantiles(material, GAMMA_BOUNDS)
+    if "gamma_object" in idata.posterior:
+        idata.posterior["gamma_material"] = (("chain", "draw"), material)
     obj_flags = [] if obj_converged else ["not-converged"]
     if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
         obj_flags.append("mostly-saturated")
-    if _width(obj_q) > NOT_IDENTIFIABLE_WIDTH:
+    if _width(obj_within) > NOT_IDENTIFIABLE_WIDTH:
         obj_flags.append("gloss-not-identifiable")
     summary = {
         "object": {
             "gamma": obj_q,
+            "gamma_within_model": obj_within,
+            "model_error": error,
             "flags": obj_flags,
             "n": {"median": shared["n_median"]},
             "converged": obj_converged,

@@ -153,7 +153,12 @@ def posterior_report(
     gamma = idata.posterior["gamma"].values  # (E, S, F)
     flat = gamma.reshape(-1, gamma.shape[-1])
     med = np.median(flat, axis=0)
-    lo90, hi90 = highest_density_interval(flat, bounds=GAMMA_BOUNDS)  # as reported
+    # each facet's reported interval: its posterior with the model's error
+    reported = {f["id"]: reported_interval(f["gamma"]) for f in summary["facets"] if f["gamma"]}
+    if all(int(i) in reported for i in ids):
+        lo90, hi90 = (np.array([reported[int(i)][j] for i in ids]) for j in (0, 1))
+    else:  # a summary from before the model error
+        lo90, hi90 = highest_density_interval(flat, bounds=GAMMA_BOUNDS)
 
     fig = plt.figure(figsize=(15, 14.5), constrained_layout=True)
     grid = fig.add_gridspec(3, 4, height_ratios=[1, 1, 1.15])
@@ -192,9 +197,19 @@ def posterior_report(
         obj_lo,
         obj_hi,
         color="tab:blue",
-        alpha=0.3,
+        alpha=0.2,
         label=f"object 90 %: {obj_lo:.3f}-{obj_hi:.3f}",
     )
+    if "gamma_within_model" in summary["object"]:  # the model's own interval, error aside
+        w_lo, w_hi = reported_interval(summary["object"]["gamma_within_model"])
+        tau = summary["object"]["model_error"]["sd"]
+        ax.axvspan(
+            w_lo,
+            w_hi,
+            color="tab:blue",
+            alpha=0.35,
+            label=f"within the model: {w_lo:.3f}-{w_hi:.3f} (model error sd {tau:.3f})",
+        )
     ax.axvline(obj["median"], color="tab:blue", lw=2, label=f"object median {obj['median']:.3f}")
     if baseline is not None and np.isfinite(baseline.object_gloss):
         ax.axvline(

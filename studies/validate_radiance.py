@@ -50,9 +50,13 @@ HERE = Path(__file__).parent
 SETS = {
     "validation_set": "validation_radiance",
     "validation_holdout": "validation_holdout",
+    "validation_holdout2": "validation_holdout2",
     "mitsuba_set": "validation_mitsuba",
 }
 RESULTS = HERE / "results"
+#: Levels of the object posterior's quantiles kept in each score (200, evenly
+#: spread inside (0, 1)): enough to redraw its interval with a model-error term.
+QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel", "lobes")
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
@@ -189,7 +193,8 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         res = estimate.estimate_bundle(b, **kwargs, sampler_options={"max_steps": max_sweeps})
         obj = res.summary["object"]
         post = res.idata.posterior
-        draws = post["gamma_object"] if "gamma_object" in post else None
+        # the reported answer's draws: with the model's error where estimate adds it
+        draws = next((post[v] for v in ("gamma_material", "gamma_object") if v in post), None)
         out[name] = {
             **{k: obj["gamma"][k] for k in ("median", "q05", "q95", "hdi90")},
             # the posterior's CDF at the truth (for calibration at every level)
@@ -201,6 +206,16 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
             "illumination": res.summary["illumination"],
             "seconds": time.perf_counter() - t0,
         }
+        # what a model-error term is computed from (bayesgloss.model_error):
+        # each facet's own posterior, and the object's posterior as quantiles
+        if "gamma_object" in post:  # the model's own posterior, the model error aside
+            own = post["gamma_object"].values
+            out[name]["object_quantiles"] = np.quantile(own, QUANTILE_LEVELS).tolist()
+            out[name]["within_model"] = reported_interval(obj["gamma_within_model"])
+            out[name]["model_error"] = obj["model_error"]
+        if "gamma" in post:
+            g = post["gamma"].values.reshape(-1, post["gamma"].shape[-1])
+            out[name]["facet_gamma"] = {"mean": g.mean(0).tolist(), "sd": g.std(0).tolist()}
         if per_frame and "frames" in res.summary:
             frames = res.summary["frames"]
             out[name]["frame"] = [f["frame"] for f in frames]

@@ -356,6 +356,20 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     assert all(f["rhat"] < 1.01 for f in s["facets"] if f["gamma"])
     assert "gamma_object" in res.idata.posterior and "sun_state_weight" in res.idata.posterior
     assert "exposure" not in res.idata.posterior  # linear-radiance: exposure known
+    # the reported interval is the model's own widened by the model error: it
+    # holds the model's (up to the error draws' Monte Carlo, < 0.005 here at
+    # 4000+ draws), by about 1.645 sd more on each side away from the bounds
+    o = s["object"]
+    err = o["model_error"]
+    assert err["sd"] == pytest.approx(np.hypot(err["floor"], err["facets_sd"]))
+    (lo, hi), (wlo, whi) = (o[k]["hdi90"] for k in ("gamma", "gamma_within_model"))
+    assert lo <= wlo + 0.005 and hi >= whi - 0.005
+    if err["sd"] > 0.02 and 0.1 < o["gamma"]["median"] < 0.9:
+        assert (hi - lo) > (whi - wlo) + 2 * err["sd"]
+    material = res.idata.posterior["gamma_material"].values
+    assert material.shape == res.idata.posterior["gamma_object"].shape
+    assert np.std(material) >= np.std(res.idata.posterior["gamma_object"].values)
+    assert all("gamma_within_model" in f for f in s["facets"] if f["gamma"])
     estimate.write_result(tmp_path / "out", res)
     back = estimate.read_result(tmp_path / "out")
     png = report.posterior_report(b, back, path=tmp_path / "out" / "report.png")
