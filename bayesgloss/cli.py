@@ -603,7 +603,8 @@ def _parser() -> argparse.ArgumentParser:
         help="the one-material model's Fresnel term (default "
         f"{DEFAULT_FRESNEL!r}): 'radiance' raises the glossy part toward grazing views by "
         "Radiance's Fresnel estimate, with its strength (0: Radiance's rough materials, "
-        "1: smooth ones and real surfaces) and the normal-incidence albedo inferred "
+        "1: smooth ones and real surfaces) and the normal-incidence albedo inferred; "
+        "'schlick' the same with Schlick's rise (1 - cos)^5, a dielectric coating's "
         "(bayesgloss.fresnel)",
     )
     es.add_argument(

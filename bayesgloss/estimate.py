@@ -289,7 +289,7 @@ def estimate_bundle(
     progress : callable, optional
         Called with (done, total): facets of the fixed-brightness model, or
         sweeps of the joint sampler's cap.
-    fresnel : {"none", "radiance"}, optional
+    fresnel : {"none", "radiance", "schlick"}, optional
         The one-material model's Fresnel model (:mod:`bayesgloss.fresnel`;
         per-frame illumination only); default
         :data:`bayesgloss.joint_estimate.DEFAULT_FRESNEL`.

@@ -31,6 +31,17 @@ different angles tells them. A bright material (A near 1) barely shows the
 raise; a dark one (A = 0.2: plastic of specularity 0.04 and colour 0.2) is
 dominated by it at views beyond about 70 degrees.
 
+``"schlick"`` is the same model with Schlick's rise F(c) = (1 - c)^5
+(:func:`bayesgloss.reflectance.fresnel_schlick` with F0 = 0) in place of
+Radiance's estimate: a dielectric coating over a diffuse base (Mitsuba's
+``plastic``, a microfacet material's Fresnel factor at the half-vector's
+angle, here at the mirror direction's) reflects F0 + (1 - F0) F(c) in its
+specular part, so g_f = g0 + F_f (1 - g0) with g0 = F0, and passes (1 -
+F(c)) of the light through its surface on the way in and out, the diffuse
+part's (1 - F_f) and the sun's (1 - F(c_i)), as above. The two rises are
+close (0.051 and 0.031 at 60 degrees, 0.31 and 0.33 at 78); Schlick's is
+the microfacet literature's and the one issue 14 names.
+
 Limits. Only the object's answer (the one-material model) has the raise;
 each facet's own posterior given the object's light
 (:func:`bayesgloss.sampling.facets_given_frames`) has none, so a facet's
@@ -58,6 +69,7 @@ from . import reflectance
 __all__ = [
     "FRESNEL_MODELS",
     "FRESNEL_COLUMNS",
+    "FRESNEL_RISES",
     "NORMAL_ALBEDO_RANGE",
     "FresnelTerms",
     "fresnel_terms",
@@ -68,10 +80,19 @@ __all__ = [
 ]
 
 #: Fresnel models of the one-material fit: ``"none"`` (no Fresnel term, the
-#: model of earlier versions and of Radiance's rough materials) and
+#: model of earlier versions and of Radiance's rough materials),
 #: ``"radiance"`` (Radiance's estimate with an unknown strength k in [0, 1]
-#: and normal-incidence albedo A; module docstring).
-FRESNEL_MODELS = ("none", "radiance")
+#: and normal-incidence albedo A; module docstring) and ``"schlick"`` (the
+#: same with Schlick's rise (1 - c)^5 for F: a dielectric coating's, as
+#: microfacet models and Mitsuba's plastics have it).
+FRESNEL_MODELS = ("none", "radiance", "schlick")
+
+#: The rise F(c) of each Fresnel model (c the view or incidence cosine):
+#: 0 at normal incidence (Radiance's: 8.5e-4), 1 at grazing.
+FRESNEL_RISES = {
+    "radiance": reflectance.fresnel_radiance,
+    "schlick": reflectance.fresnel_schlick,
+}
 
 #: Columns of theta (after gamma, log n, log s, log sigma) holding the
 #: Fresnel strength k and log A, where the data carry Fresnel terms.
@@ -104,14 +125,15 @@ class FresnelTerms:
 
     view: np.ndarray
     sun_direct: np.ndarray
+    model: str = "radiance"
 
     def take(self, facets=slice(None), frames=slice(None)) -> FresnelTerms:
         """The terms of a subset of facets and frames."""
-        return FresnelTerms(self.view[facets], self.sun_direct[facets][:, frames])
+        return FresnelTerms(self.view[facets], self.sun_direct[facets][:, frames], self.model)
 
 
-def fresnel_terms(geometry, sun_direction, solar_irradiance) -> FresnelTerms:
-    """Radiance's Fresnel estimates of each facet's view and of the sun on it.
+def fresnel_terms(geometry, sun_direction, solar_irradiance, model="radiance") -> FresnelTerms:
+    """A Fresnel model's rise at each facet's view and at the sun on it.
 
     Parameters
     ----------
@@ -121,6 +143,8 @@ def fresnel_terms(geometry, sun_direction, solar_irradiance) -> FresnelTerms:
         Unit vectors toward the sun.
     solar_irradiance : array_like (T,)
         Normal irradiance of the solar disc, 0 where the sun is down [W m^-2].
+    model : {"radiance", "schlick"}
+        Which rise F (:data:`FRESNEL_RISES`).
 
     Returns
     -------
@@ -128,13 +152,16 @@ def fresnel_terms(geometry, sun_direction, solar_irradiance) -> FresnelTerms:
         F(max(c_f, 0.001)) (``pdot``'s floor in ``normal.c``), and
         c_i E_sun / pi F(c_i) (0 where c_i <= 0).
     """
+    if model not in FRESNEL_RISES:
+        raise ValueError(f"no Fresnel rise of model {model!r}; valid: {', '.join(FRESNEL_RISES)}")
+    rise = FRESNEL_RISES[model]
     cos_view = np.maximum(geometry.cos_view, 0.001)
-    view = reflectance.fresnel_radiance(cos_view)
+    view = rise(cos_view)
     sun = np.asarray(sun_direction, dtype=float)
     cos_i = np.maximum(geometry.normal @ sun.T, 0.0)  # (F, T)
     direct = cos_i * np.asarray(solar_irradiance, dtype=float)[None, :] / np.pi
-    f_i = np.where(cos_i > 0, reflectance.fresnel_radiance(np.maximum(cos_i, 1e-9)), 0.0)
-    return FresnelTerms(view, direct * f_i)
+    f_i = np.where(cos_i > 0, rise(np.maximum(cos_i, 1e-9)), 0.0)
+    return FresnelTerms(view, direct * f_i, model)
 
 
 def fresnel_parts(base, glossy, strength, log_albedo, view, sun_direct=None, gamma=None):

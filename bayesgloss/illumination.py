@@ -206,7 +206,14 @@ def _even_mix(sources: int) -> np.ndarray:
 
 
 def illumination_bases(
-    geometry, day, exponents=render.DEFAULT_EXPONENTS, others=(), *, lobe_family="phong", **kwargs
+    geometry,
+    day,
+    exponents=render.DEFAULT_EXPONENTS,
+    others=(),
+    *,
+    lobe_family="phong",
+    fresnel="radiance",
+    **kwargs,
 ) -> IlluminationBases:
     """Forward-model bases of the sun of ``day``, its sky, and other skies'.
 
@@ -223,6 +230,10 @@ def illumination_bases(
     lobe_family : {"phong", "ward", "ggx"}
         The glossy lobe's family (:mod:`bayesgloss.lobes`), tabulated on the
         Phong-equivalent ``exponents``.
+    fresnel : {"radiance", "schlick"}
+        Whose Fresnel rise the bases' Fresnel terms hold
+        (:data:`bayesgloss.fresnel.FRESNEL_RISES`), for a one-material model
+        with that Fresnel model.
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...). ``occlusion`` (a
@@ -265,7 +276,7 @@ def illumination_bases(
         parts[0].exponents,
         1 + len(others),
         np.stack(ratios),
-        _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun), kwargs.get("occlusion")),
+        _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun, fresnel), kwargs.get("occlusion")),
     )
 
 
@@ -423,12 +434,17 @@ def joint_data(
     priors, frame_priors
         Facet and frame priors (defaults: :class:`bayesgloss.likelihood.Priors`,
         :class:`IlluminationPriors`).
-    fresnel : {"none", "radiance"}
+    fresnel : {"none", "radiance", "schlick"}
         The one-material model's Fresnel model (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
     """
     fr.check_fresnel_model(fresnel)
     if fresnel != "none" and bases.fresnel is None:
         raise ValueError("Fresnel model needs bases with Fresnel terms (illumination_bases)")
+    if fresnel != "none" and bases.fresnel.model != fresnel:
+        raise ValueError(
+            f"Fresnel model {fresnel!r} needs bases with its terms; these hold "
+            f"{bases.fresnel.model!r}'s (illumination_bases(..., fresnel={fresnel!r}))"
+        )
     y = np.asarray(y, dtype=float)
     valid = np.asarray(valid, dtype=bool) & np.isfinite(y)
     total = bases.total()

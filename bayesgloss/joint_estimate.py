@@ -96,6 +96,7 @@ def joint_inputs(
         day,
         others=others,
         lobe_family=lobe_family,
+        fresnel="radiance" if fresnel == "none" else fresnel,
         ground=ground,
         ground_reflectance=rho,
         **mesh,

@@ -77,6 +77,7 @@ __all__ = [
     "WARD_NORMALISATIONS",
     "RadianceMaterial",
     "fresnel_radiance",
+    "fresnel_schlick",
     "gloss_of_radiance_material",
     "lambert",
     "luminance_rgb",
@@ -586,6 +587,34 @@ def _ward_material(
 # --------------------------------------------------------------------------
 # Radiance's plastic and metal
 # --------------------------------------------------------------------------
+
+
+def fresnel_schlick(cos_theta: ArrayLike, f0: ArrayLike = 0.0) -> NDArray[np.float64]:
+    """Schlick's approximation of the Fresnel reflectance, F0 + (1 - F0) (1 - c)^5.
+
+    Schlick (1994), eq. 24; the Fresnel factor of microfacet lobes
+    (Walter et al. 2007). With ``f0 = 0`` it is the rise of the reflectance
+    from normal incidence toward 1 at grazing, (F - F0) / (1 - F0), the
+    part :mod:`bayesgloss.fresnel` scales a smooth material's glossy and
+    diffuse parts by.
+
+    Parameters
+    ----------
+    cos_theta : float or array_like
+        Cosine between the ray and the normal (or the microfacet normal); its
+        absolute value is used [-].
+    f0 : float or array_like
+        Reflectance at normal incidence, ((eta - 1) / (eta + 1))^2 for a
+        dielectric of relative index eta [-].
+
+    Returns
+    -------
+    ndarray
+        1 at grazing, ``f0`` at normal incidence [-].
+    """
+    c = np.clip(np.abs(np.asarray(cos_theta, dtype=float)), 0.0, 1.0)
+    f0 = np.asarray(f0, dtype=float)
+    return f0 + (1.0 - f0) * (1.0 - c) ** 5
 
 
 def fresnel_radiance(

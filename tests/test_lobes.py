@@ -135,7 +135,7 @@ def test_stacking_names_the_generating_lobe_family(tmp_path, family, exponent, g
     s = res.summary
     assert s["lobe_families"][family]["weight"] > 0.95
     assert s["lobe_family"] == family
-    g = s["object"]["gamma"]
+    g = s["object"]["gamma_within_model"]  # the model's own interval
     assert g["q05"] <= gamma <= g["q95"]
     alpha = float(lobes.roughness_of_exponent(exponent))
     r = s["lobe_families"][family]["roughness"]
