@@ -216,6 +216,12 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         if "gamma" in post:
             g = post["gamma"].values.reshape(-1, post["gamma"].shape[-1])
             out[name]["facet_gamma"] = {"mean": g.mean(0).tolist(), "sd": g.std(0).tolist()}
+            # each facet's reported interval (with the model error) and its own
+            seen = [f for f in res.summary["facets"] if f["gamma"]]
+            out[name]["facet_hdi90"] = [reported_interval(f["gamma"]) for f in seen]
+            out[name]["facet_within_hdi90"] = [
+                reported_interval(f.get("gamma_within_model", f["gamma"])) for f in seen
+            ]
         if per_frame and "frames" in res.summary:
             frames = res.summary["frames"]
             out[name]["frame"] = [f["frame"] for f in frames]
