@@ -296,6 +296,21 @@ def table(scores: list[dict]) -> dict:
             if m != "baseline":
                 cover = [_holds(s[m], s["truth"]) for s in sun if m in s]
                 e["coverage90_direct_sun"] = float(np.mean(cover)) if cover else None
+                # the model's own interval, where the score has it (stop 30 on)
+                own = [
+                    s[m]["within_model"][0] <= s["truth"] <= s[m]["within_model"][1]
+                    for s in sun
+                    if "within_model" in s.get(m, {})
+                ]
+                if own:
+                    e["coverage90_within_model_direct_sun"] = float(np.mean(own))
+                # each facet's interval on the sun-lit days (the truth is the object's)
+                for key, name in (("facet_hdi90", "facets"), ("facet_within_hdi90", "facets_own")):
+                    held = [
+                        lo <= s["truth"] <= hi for s in sun for lo, hi in s.get(m, {}).get(key, [])
+                    ]
+                    if held:
+                        e[f"coverage90_{name}_direct_sun"] = float(np.mean(held))
                 tails = [s[m]["q05"] <= s["truth"] <= s[m]["q95"] for s in sun if m in s]
                 e["coverage90_equal_tailed_direct_sun"] = float(np.mean(tails)) if tails else None
                 over = [s for s in rows if not s["direct_sun"] and m in s]
