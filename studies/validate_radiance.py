@@ -57,13 +57,14 @@ RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
 #: spread inside (0, 1)): enough to redraw its interval with a model-error term.
 QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
-METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel", "lobes")
+METHODS = ("baseline", "fixed", "per-frame", "families", "fresnel", "schlick", "lobes")
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
     "fixed": {"per_frame": False},
     "per-frame": {"per_frame": True},
     "families": {"per_frame": True, "illumination": "families"},
     "fresnel": {"per_frame": True, "illumination": "families", "fresnel": "radiance"},
+    "schlick": {"per_frame": True, "illumination": "families", "fresnel": "schlick"},
     "lobes": {"per_frame": True, "illumination": "families", "lobe": "families"},
 }
 #: Methods scored by default on a set that has none cached (``--methods``).
