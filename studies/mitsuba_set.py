@@ -46,13 +46,15 @@ from pathlib import Path
 
 import numpy as np
 from validation_set import (  # the same draws as the Radiance validation set
-    BASE_CATEGORIES,
-    _cie_sky,
+    _camera,
+    _camera_response,
+    _cie_types,
     _encodings,
     _flags,
     _labels,
+    _object,
     _site_and_times,
-    _sky,
+    _sky_of,
     _uniform,
     sky_category,
 )
@@ -128,55 +130,17 @@ def draw_sequences(cfg: dict) -> list[mr.MitsubaSequence]:
     metals = [i for i in range(n) if classes[i].endswith("metal")]
     custom = set(int(i) for i in rng.permutation(metals)[: m["custom_conductor"]])
     groups = [list(rng.permutation(g)) for g in cfg["sky"]["cie_type_groups"]]
-    n_cie = 0
+    cie_types = _cie_types(groups)
 
     out = []
     for i in range(n):
         category = categories[i]
         base = _site_and_times(rng, cfg, bool(north[i]), bool(high[i]), schemes[i])
-        sky_cat = category
-        if category == "auto-exposure":
-            sky_cat = BASE_CATEGORIES[int(rng.integers(len(BASE_CATEGORIES)))]
-        if sky_cat == "cie-general":
-            group = groups[n_cie % len(groups)]
-            sky_type = int(group[(n_cie // len(groups)) % len(group)])
-            n_cie += 1
-            sky_fields = _cie_sky(rng, cfg, sky_type, base)
-        else:
-            sky_fields = _sky(rng, cfg, sky_cat, base)
-        cam = cfg["camera"]
-        camera = dict(
-            view=round(_uniform(rng, cam["bearing"]), 2),
-            camera_height=round(_uniform(rng, cam["height"]), 3),
-            camera_distance=round(_uniform(rng, cam["distance"]), 3),
-        )
-        o = cfg["objects"]
-        if shapes[i] == "hemisphere":
-            obj = dict(
-                n_rings=int(rng.integers(o["n_rings"][0], o["n_rings"][1] + 1)),
-                n_segments=int(rng.integers(o["n_segments"][0], o["n_segments"][1] + 1)),
-            )
-        elif shapes[i] == "box":
-            obj = dict(
-                box_size=tuple(round(float(v), 3) for v in rng.uniform(*o["box_size"], 3)),
-                box_azimuth=round(_uniform(rng, o["box_azimuth"]), 2),
-            )
-        else:
-            obj = dict(
-                gem_stand=str(o["gem_stand"][int(rng.integers(len(o["gem_stand"])))]),
-                gem_azimuth=round(_uniform(rng, o["gem_azimuth"]), 2),
-            )
+        sky_fields = _sky_of(rng, cfg, category, base, cie_types)
+        camera = _camera(rng, cfg)
+        obj = _object(rng, cfg, shapes[i])
         material = _material(rng, m, classes[i], bool(grey[i]), i in custom)
-        e = cfg["encodings"][encodings[i]]
-        response = dict(
-            pixel_encoding=encodings[i],
-            bit_depth=e["bit_depth"],
-            sensor_noise=round(_uniform(rng, e["sensor_noise"]), 5),
-            white_scale=round(_uniform(rng, e["white_scale"]), 4),
-        )
-        if category == "auto-exposure":
-            jitter = round(_uniform(rng, cfg["sky"]["auto_exposure_jitter"]), 4)
-            response.update(exposure="auto", exposure_jitter=jitter)
+        response = _camera_response(rng, cfg, encodings[i], category)
         config = sequences.SequenceConfig(
             name=f"ms{i:02d}-{classes[i]}",
             category=category,

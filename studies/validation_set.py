@@ -240,6 +240,73 @@ def _cie_sky(rng, cfg: dict, sky_type: int, base: dict) -> dict:
     )
 
 
+def _cie_types(groups):
+    """The CIE sky types in the order the set hands them out: the groups
+    (overcast, partly cloudy, clear) in turn, each group's types in its
+    drawn order (no random draw)."""
+    n = 0
+    while True:
+        group = groups[n % len(groups)]
+        yield int(group[(n // len(groups)) % len(group)])
+        n += 1
+
+
+def _sky_of(rng, cfg: dict, category: str, base: dict, cie_types) -> dict:
+    """A sequence's sky fields: an auto-exposure day's sky category drawn
+    first, then the category's sky (``cie_types``, :func:`_cie_types`)."""
+    sky_category = category
+    if category == "auto-exposure":
+        sky_category = BASE_CATEGORIES[int(rng.integers(len(BASE_CATEGORIES)))]
+    if sky_category == "cie-general":
+        return _cie_sky(rng, cfg, next(cie_types), base)
+    return _sky(rng, cfg, sky_category, base)
+
+
+def _camera(rng, cfg: dict) -> dict:
+    """A sequence's camera bearing, height and distance."""
+    cam = cfg["camera"]
+    return dict(
+        view=round(_uniform(rng, cam["bearing"]), 2),
+        camera_height=round(_uniform(rng, cam["height"]), 3),
+        camera_distance=round(_uniform(rng, cam["distance"]), 3),
+    )
+
+
+def _object(rng, cfg: dict, shape: str) -> dict:
+    """A sequence's object fields of ``shape`` (hemisphere, box or gem)."""
+    o = cfg["objects"]
+    if shape == "hemisphere":
+        return dict(
+            n_rings=int(rng.integers(o["n_rings"][0], o["n_rings"][1] + 1)),
+            n_segments=int(rng.integers(o["n_segments"][0], o["n_segments"][1] + 1)),
+        )
+    if shape == "box":
+        return dict(
+            box_size=tuple(round(float(v), 3) for v in rng.uniform(*o["box_size"], 3)),
+            box_azimuth=round(_uniform(rng, o["box_azimuth"]), 2),
+        )
+    return dict(
+        gem_stand=str(o["gem_stand"][int(rng.integers(len(o["gem_stand"])))]),
+        gem_azimuth=round(_uniform(rng, o["gem_azimuth"]), 2),
+    )
+
+
+def _camera_response(rng, cfg: dict, encoding: str, category: str) -> dict:
+    """A sequence's pixel encoding, sensor noise and white scale, and an
+    auto-exposure day's exposure jitter."""
+    e = cfg["encodings"][encoding]
+    response = dict(
+        pixel_encoding=encoding,
+        bit_depth=e["bit_depth"],
+        sensor_noise=round(_uniform(rng, e["sensor_noise"]), 5),
+        white_scale=round(_uniform(rng, e["white_scale"]), 4),
+    )
+    if category == "auto-exposure":
+        jitter = round(_uniform(rng, cfg["sky"]["auto_exposure_jitter"]), 4)
+        response.update(exposure="auto", exposure_jitter=jitter)
+    return response
+
+
 def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     """The validation set's sequences, drawn from ``default_rng(cfg["seed"])``.
 
@@ -275,7 +342,7 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     rough_zero = _flags(rng, m["roughness_zero"], n)
     grey = _flags(rng, m["grey"], n)
     groups = [list(rng.permutation(g)) for g in cfg["sky"]["cie_type_groups"]]
-    n_cie = 0
+    cie_types = _cie_types(groups)
     ambient = cfg["ambient"]
     if isinstance(ambient, str):  # a name of bayesgloss.sequences' settings
         if not ambient.endswith("_AMBIENT") or not hasattr(sequences, ambient):
@@ -290,41 +357,10 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
     for i in range(n):
         category = categories[i]
         base = _site_and_times(rng, cfg, bool(north[i]), bool(high[i]), schemes[i])
-        sky_category = category
-        if category == "auto-exposure":
-            sky_category = BASE_CATEGORIES[int(rng.integers(len(BASE_CATEGORIES)))]
-        if sky_category == "cie-general":
-            group = groups[n_cie % len(groups)]  # overcast, partly cloudy, clear in turn
-            sky_type = int(group[(n_cie // len(groups)) % len(group)])
-            n_cie += 1
-            sky_fields = _cie_sky(rng, cfg, sky_type, base)
-        else:
-            sky_fields = _sky(rng, cfg, sky_category, base)
-
-        cam = cfg["camera"]
-        camera = dict(
-            view=round(_uniform(rng, cam["bearing"]), 2),
-            camera_height=round(_uniform(rng, cam["height"]), 3),
-            camera_distance=round(_uniform(rng, cam["distance"]), 3),
-        )
-
-        o = cfg["objects"]
+        sky_fields = _sky_of(rng, cfg, category, base, cie_types)
+        camera = _camera(rng, cfg)
         shape = shapes[i]
-        if shape == "hemisphere":
-            obj = dict(
-                n_rings=int(rng.integers(o["n_rings"][0], o["n_rings"][1] + 1)),
-                n_segments=int(rng.integers(o["n_segments"][0], o["n_segments"][1] + 1)),
-            )
-        elif shape == "box":
-            obj = dict(
-                box_size=tuple(round(float(v), 3) for v in rng.uniform(*o["box_size"], 3)),
-                box_azimuth=round(_uniform(rng, o["box_azimuth"]), 2),
-            )
-        else:
-            obj = dict(
-                gem_stand=str(o["gem_stand"][int(rng.integers(len(o["gem_stand"])))]),
-                gem_azimuth=round(_uniform(rng, o["gem_azimuth"]), 2),
-            )
+        obj = _object(rng, cfg, shape)
 
         if spec_kind[i] == "zero":
             spec = 0.0
@@ -338,16 +374,7 @@ def draw_configs(cfg: dict) -> list[sequences.SequenceConfig]:
         else:
             colour = tuple(round(float(v), 4) for v in rng.uniform(*m["rgb_range"], 3))
 
-        e = cfg["encodings"][encodings[i]]
-        camera_response = dict(
-            pixel_encoding=encodings[i],
-            bit_depth=e["bit_depth"],
-            sensor_noise=round(_uniform(rng, e["sensor_noise"]), 5),
-            white_scale=round(_uniform(rng, e["white_scale"]), 4),
-        )
-        if category == "auto-exposure":
-            jitter = round(_uniform(rng, cfg["sky"]["auto_exposure_jitter"]), 4)
-            camera_response.update(exposure="auto", exposure_jitter=jitter)
+        camera_response = _camera_response(rng, cfg, encodings[i], category)
 
         out.append(
             sequences.SequenceConfig(
