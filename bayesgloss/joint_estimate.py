@@ -212,6 +212,9 @@ def add_facet_posteriors(idata, samples, seed) -> None:
     values["sigma"] = np.exp(fd[..., 3])
     for name, v in values.items():
         idata.posterior[name] = (("chain", "draw", "facet"), v)
+    # the facets' ids (the label image's values), as the observations have
+    # them: the posterior had no facet variable to carry them before these
+    idata.posterior = idata.posterior.assign_coords(facet=idata.observed_data["facet"].values)
     samples.facets = facet_run
 
 

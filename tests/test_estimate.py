@@ -372,6 +372,11 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     assert material.shape == res.idata.posterior["gamma_object"].shape
     assert np.std(material) >= np.std(res.idata.posterior["gamma_object"].values)
     assert all("gamma_within_model" in f for f in s["facets"] if f["gamma"])
+    # the posterior's facets are the label image's ids (the report paints by
+    # them; they were 0..F-1 once, and every panel painted the wrong facets)
+    seen = [f["id"] for f in s["facets"] if f["gamma"]]
+    assert list(res.idata.posterior["facet"].values) == seen
+    assert list(res.idata.observed_data["facet"].values) == seen
     estimate.write_result(tmp_path / "out", res)
     back = estimate.read_result(tmp_path / "out")
     png = report.posterior_report(b, back, path=tmp_path / "out" / "report.png")
