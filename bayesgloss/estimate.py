@@ -94,7 +94,6 @@ from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_i
 from .fresnel import check_fresnel_model
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
-from .model_error import model_error_sd, with_model_error
 from .irradiance import measured_sky
 from .joint_estimate import (
     DEFAULT_FRESNEL,
@@ -105,6 +104,7 @@ from .joint_estimate import (
     sky_model_summary,
 )
 from .lobes import check_lobe_family
+from .model_error import model_error_sd, with_model_error
 from .pooling import population_gloss, shared_gloss
 from .results import (
     RESULT_FILES,

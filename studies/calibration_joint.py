@@ -647,8 +647,7 @@ def object_record(obj: dict, result, sim_out: dict, levels, seconds: float, caug
         "noise_sd": obj["noise_sd"],
         "truth": {"gamma": truth, "n": float(np.exp(obj["log_n"]))},
         "object": {
-            k: o.get("gamma_within_model", o["gamma"])[k]
-            for k in ("median", "q05", "q95", "hdi90")
+            k: o.get("gamma_within_model", o["gamma"])[k] for k in ("median", "q05", "q95", "hdi90")
         },
         "object_reported": {k: o["gamma"][k] for k in ("median", "q05", "q95", "hdi90")},
         "shared_material_gamma": o["shared_material_gamma"],

@@ -128,7 +128,7 @@ def main(argv=None) -> None:
     }
     (HERE / "results" / "model_error_floor.json").write_text(json.dumps(out, indent=1))
     print(f"{len(scores)} sun-lit development sequences; floor {chosen['floor']}")
-    for r in rows[:: 2]:
+    for r in rows[::2]:
         print(r)
 
 
