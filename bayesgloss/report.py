@@ -185,7 +185,7 @@ def posterior_report(
         vmin=0,
         vmax=max(0.05, float(np.max(hi90 - lo90))),
     )
-    ax.set_title("(c) 90 % interval width")
+    ax.set_title("(c) 90 % interval width (with the model error)")
     ax.axis("off")
     fig.colorbar(im, ax=ax, shrink=0.8, label="highest-density interval width [-]")
 
