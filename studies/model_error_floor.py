@@ -3,9 +3,10 @@
 :data:`bayesgloss.model_error.MODEL_ERROR_FLOOR` is the smallest value on a
 0.005 grid from 0 to 0.2 at which the default's object interval widened by
 the model error (floor and the facets' disagreement, in quadrature) holds
-the truth in at least 90 % of the development sequences with direct sun
-(studies/README, "Model error", where the rule was written before any
-score). Development sequences: the first holdout's (their scores from
+the truth in at least 90 % of the development sequences with direct sun,
+or, where no floor on the grid does, as often as any does (studies/README,
+"Model error": the rule was written before any score, and its fallback
+amended after the first run, which never reached 90 %). Development sequences: the first holdout's (their scores from
 ``validate_radiance.py --set validation_holdout``, in
 ``out/validation_holdout/scores``) and the validation-set bundles on disk
 (scored here with the default alone, into ``out/validation_set/scores_default``,
@@ -99,8 +100,12 @@ def main(argv=None) -> None:
                 "median_width": float(np.median(widths)),
             }
         )
-    reached = [r for r in rows if r["coverage90"] >= TARGET]
-    chosen = reached[0] if reached else rows[-1]
+    # the rule as amended after the first run (studies/README, "Model error"):
+    # the smallest floor at which the coverage reaches 90 %, or, where no
+    # floor on the grid does, its highest value on the grid
+    best = max(r["coverage90"] for r in rows)
+    reached = [r for r in rows if r["coverage90"] >= min(TARGET, best)]
+    chosen = reached[0]
     rng = np.random.default_rng(SEED)
     per_sequence = []
     for s in scores:
@@ -112,17 +117,18 @@ def main(argv=None) -> None:
                 "bundle": s["bundle"],
                 "truth": s["truth"],
                 "median": e["median"],
-                "within_model": reported_interval(e),
+                "within_model": e.get("within_model", reported_interval(e)),
                 "facets_sd": model_error_sd(fac["mean"], fac["sd"], floor=0.0)["facets_sd"],
                 "with_model_error": reported_interval(wq),
             }
         )
     out = {
-        "rule": "smallest floor on the grid with coverage90 >= 0.9 over the development "
-        "sequences with direct sun (studies/README, 'Model error')",
+        "rule": "smallest floor on the grid with coverage90 >= min(0.9, its highest value "
+        "on the grid) over the development sequences with direct sun (studies/README, "
+        "'Model error': amended after the first run, where 0.9 was not reached)",
         "n_sequences": len(scores),
         "floor": chosen["floor"],
-        "reached_target": bool(reached),
+        "reached_target": best >= TARGET,
         "grid": rows,
         "sequences": per_sequence,
     }
