@@ -312,7 +312,8 @@ def test_censored_highlights_end_to_end(clipped_bundle, monkeypatch):
         return y, usable, np.zeros_like(usable)
 
     monkeypatch.setattr(estimate, "observations", exact)
-    naive = estimate.estimate_bundle(b, seed=0, per_frame=False).summary["object"]["gamma"]
+    naive = estimate.estimate_bundle(b, seed=0, per_frame=False).summary["object"]
+    naive = naive["gamma_within_model"]  # the model's own (a model's bias, its error aside)
     assert naive["q05"] > truth + 0.03, (naive, truth)
     assert naive["median"] > obj["gamma"]["median"] + 0.03
 
