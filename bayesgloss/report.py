@@ -180,12 +180,12 @@ def posterior_report(
 
     ax = fig.add_subplot(grid[0, 2])
     im = ax.imshow(
-        _paint(bundle.labels, ids, hi90 - lo90),
+        _paint(bundle.labels, ids, hi90 - lo90)[crop],
         cmap="magma_r",
         vmin=0,
         vmax=max(0.05, float(np.max(hi90 - lo90))),
     )
-    ax.set_title("(c) 90 % interval width (with the model error)")
+    ax.set_title("(c) 90 % width, model error in")
     ax.axis("off")
     fig.colorbar(im, ax=ax, shrink=0.8, label="highest-density interval width [-]")
 
