@@ -185,7 +185,7 @@ def posterior_report(
         vmin=0,
         vmax=max(0.05, float(np.max(hi90 - lo90))),
     )
-    ax.set_title("(c) 90 % width, model error in")
+    ax.set_title("(c) reported 90 % width")
     ax.axis("off")
     fig.colorbar(im, ax=ax, shrink=0.8, label="highest-density interval width [-]")
 
