@@ -185,10 +185,11 @@ def _encode_codes(value, encoding, response_gamma):
     return v
 
 
-@pytest.fixture(scope="session")
-def paper_three_skies():
+def paper_three_skies_bases(**kwargs):
     """Split bases of the paper scene (SW) under gensky's clear, intermediate and
-    overcast skies (the ``auto`` mixture), sun-up frames."""
+    overcast skies (the ``auto`` mixture), sun-up frames, and the seen
+    geometry: (bases, up, geometry); ``kwargs`` for
+    :func:`bayesgloss.illumination.illumination_bases`."""
     from bayesgloss import illumination as il
     from bayesgloss import scene, sky
 
@@ -199,4 +200,10 @@ def paper_three_skies():
         sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
         for name in ("gensky-intermediate", "gensky-overcast")
     ]
-    return il.illumination_bases(g, seq.sky, others=others), up
+    return il.illumination_bases(g, seq.sky, others=others, **kwargs), up, g
+
+
+@pytest.fixture(scope="session")
+def paper_three_skies():
+    """:func:`paper_three_skies_bases`' bases and sun-up frames."""
+    return paper_three_skies_bases()[:2]

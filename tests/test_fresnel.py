@@ -104,17 +104,10 @@ def test_schlick_is_schlick_and_close_to_the_exact_fresnel():
 
 @pytest.fixture(scope="module")
 def paper_three_skies_schlick():
-    """paper_three_skies's bases with Schlick's Fresnel terms."""
-    from bayesgloss import scene, sky
+    """paper_three_skies's bases with Schlick's Fresnel terms, and the geometry."""
+    from conftest import paper_three_skies_bases
 
-    seq = scene.paper_sequence(view="SW")
-    g = scene.seen_geometry(seq)
-    up = seq.sky.sun_direction[:, 2] > 0.02
-    others = [
-        sky.daylight(name, seq.sky.sun_direction, ground_reflectance=0.2)
-        for name in ("gensky-intermediate", "gensky-overcast")
-    ]
-    return il.illumination_bases(g, seq.sky, others=others, fresnel="schlick"), up, g
+    return paper_three_skies_bases(fresnel="schlick")
 
 
 def test_schlick_terms_of_the_bases(paper_three_skies, paper_three_skies_schlick):
