@@ -60,6 +60,15 @@ __all__ = [
 MODEL_ERROR_FLOOR = 0.06
 
 
+def _measured(mean, sd):
+    """The facets that measure a quantity (finite mean, finite sd > 0): their
+    means and variances."""
+    m = np.asarray(mean, dtype=float).ravel()
+    s = np.asarray(sd, dtype=float).ravel()
+    ok = np.isfinite(m) & np.isfinite(s) & (s > 0)
+    return m[ok], s[ok] ** 2
+
+
 def paule_mandel_tau(mean, sd, *, rtol: float = 1e-8) -> float:
     """Between-facet standard deviation of a quantity measured by each facet.
 
@@ -87,10 +96,7 @@ def paule_mandel_tau(mean, sd, *, rtol: float = 1e-8) -> float:
     float
         tau, in the unit of ``mean``.
     """
-    m = np.asarray(mean, dtype=float).ravel()
-    s = np.asarray(sd, dtype=float).ravel()
-    ok = np.isfinite(m) & np.isfinite(s) & (s > 0)
-    m, v = m[ok], s[ok] ** 2
+    m, v = _measured(mean, sd)
     k = m.size
     if k < 2:
         return 0.0
@@ -116,8 +122,7 @@ def model_error_sd(facet_mean, facet_sd, floor: float = MODEL_ERROR_FLOOR) -> di
     """The model error's sd, tau = sqrt(floor^2 + tau_facets^2) (module
     docstring), and its parts: ``{"sd", "floor", "facets_sd", "facets"}``
     (``facets``: how many facets measured it)."""
-    s = np.asarray(facet_sd, dtype=float)
-    n = int(np.sum(np.isfinite(s) & (s > 0) & np.isfinite(np.asarray(facet_mean, float))))
+    n = _measured(facet_mean, facet_sd)[0].size
     t_f = paule_mandel_tau(facet_mean, facet_sd)
     return {"sd": float(np.hypot(floor, t_f)), "floor": float(floor), "facets_sd": t_f, "facets": n}
 

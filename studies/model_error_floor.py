@@ -6,7 +6,9 @@ the model error (floor and the facets' disagreement, in quadrature) holds
 the truth in at least 90 % of the development sequences with direct sun,
 or, where no floor on the grid does, as often as any does (studies/README,
 "Model error": the rule was written before any score, and its fallback
-amended after the first run, which never reached 90 %). Development sequences: the first holdout's (their scores from
+amended after the first run, which never reached 90 %).
+
+Development sequences: the first holdout's (their scores from
 ``validate_radiance.py --set validation_holdout``, in
 ``out/validation_holdout/scores``) and the validation-set bundles on disk
 (scored here with the default alone, into ``out/validation_set/scores_default``,
