@@ -248,6 +248,7 @@ def _estimate(args: argparse.Namespace) -> int:
         sampler_options={"max_steps": args.max_steps},
         fresnel=args.fresnel,
         lobe=args.lobe,
+        occluder_albedo=args.occluder_albedo,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -295,6 +296,10 @@ def _print_estimate(name, summary) -> None:
         print(f"lobe families (stacking weight): {weights}")
     elif summary.get("lobe_family", "phong") != "phong":
         print(f"lobe family: {summary['lobe_family']}")
+    if "occluder_albedos" in summary:  # estimate --occluder-albedo stacked, with a mesh
+        fam = summary["occluder_albedos"]
+        weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
+        print(f"albedo of the object's own faces (stacking weight): {weights}")
     if "fresnel_strength" in o:  # the Fresnel raise's unknowns (estimate --fresnel radiance)
         k, a = o["fresnel_strength"], o["normal_albedo"]
         print(
@@ -345,6 +350,7 @@ def _estimate_many(args, progress) -> int:
                 **({"per_frame": True} if args.per_frame else {}),
                 **({"fresnel": args.fresnel} if args.fresnel else {}),
                 **({"lobe": args.lobe} if args.lobe else {}),
+                **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
                 "bundle_content": content,
             },
         )
@@ -508,6 +514,8 @@ def _parser() -> argparse.ArgumentParser:
     from .fresnel import FRESNEL_MODELS
     from .joint_estimate import DEFAULT_FRESNEL
     from .lobes import LOBE_FAMILIES
+    from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
+    from .render import OCCLUDER_REFLECTANCE
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -614,6 +622,16 @@ def _parser() -> argparse.ArgumentParser:
         help="the glossy lobe's family (default 'phong'): Radiance's 'ward', a GGX "
         "microfacet lobe with Smith shadowing 'ggx', or 'families': one fit per family, "
         "stacked by PSIS-LOO (bayesgloss.lobes, bayesgloss.lobe_families)",
+    )
+    es.add_argument(
+        "--occluder-albedo",
+        default=None,
+        choices=OCCLUDER_ALBEDO_MODES,
+        help="for a bundle with an object_mesh, the albedo of the object's own faces that "
+        f"light its other facets (default {DEFAULT_OCCLUDER_ALBEDO!r}): 'fixed' at "
+        f"{OCCLUDER_REFLECTANCE:g}, or 'stacked': one fit per albedo of "
+        f"{', '.join(f'{a:g}' for a in OCCLUDER_ALBEDOS)}, stacked by PSIS-LOO "
+        "(bayesgloss.occluder_albedo)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

@@ -105,6 +105,11 @@ from .joint_estimate import (
 )
 from .lobes import check_lobe_family
 from .model_error import model_error_sd, with_model_error
+from .occluder_albedo import (
+    DEFAULT_OCCLUDER_ALBEDO,
+    check_occluder_albedo_mode,
+    fit_occluder_albedos,
+)
 from .pooling import population_gloss, shared_gloss
 from .results import (
     RESULT_FILES,
@@ -254,6 +259,7 @@ def estimate_bundle(
     sampler_options: dict | None = None,
     fresnel: str | None = None,
     lobe: str | None = None,
+    occluder_albedo: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -298,6 +304,13 @@ def estimate_bundle(
         illumination only), or ``"families"``: one fit per family, stacked
         by PSIS-LOO (:mod:`bayesgloss.lobe_families`); default
         :data:`bayesgloss.joint_estimate.DEFAULT_LOBE_FAMILY`.
+    occluder_albedo : {"fixed", "stacked"}, optional
+        For a bundle with an ``object_mesh`` (per-frame illumination only):
+        its faces' albedo fixed at :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`,
+        or one fit per albedo of :data:`bayesgloss.occluder_albedo.OCCLUDER_ALBEDOS`
+        stacked by PSIS-LOO (:mod:`bayesgloss.occluder_albedo`); default
+        :data:`bayesgloss.occluder_albedo.DEFAULT_OCCLUDER_ALBEDO`. Without a
+        mesh it changes nothing.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -337,8 +350,36 @@ def estimate_bundle(
         sampler_options["fresnel"] = fresnel
         if lobe != "families":
             sampler_options["lobe_family"] = lobe
-    families = lobe_info = None
-    if lobe == "families":
+    occluder = check_occluder_albedo_mode(occluder_albedo or DEFAULT_OCCLUDER_ALBEDO)
+    stack_occluder = occluder == "stacked" and joint and bool(b.manifest.get("object_mesh"))
+    if stack_occluder and lobe == "families":
+        raise ValueError(
+            "occluder albedo 'stacked' and lobe 'families' each fit and stack several "
+            "models; name a lobe, or fix the occluder albedo"
+        )
+    families = lobe_info = occluder_info = None
+    if stack_occluder:
+        idata, samples, used, occluder_info = fit_occluder_albedos(
+            b,
+            curves,
+            y,
+            usable,
+            censored,
+            keep,
+            illumination,
+            seed,
+            sampler_options,
+            progress,
+            jobs,
+        )
+        families = occluder_info.pop("sky_families", None)
+        run = {
+            "seconds": occluder_info.pop("seconds"),
+            "sweeps": samples.n_sweeps,
+            "facet_seconds": samples.facets.seconds,
+            "model": "joint, one fit per occluder albedo (and sky family), stacked",
+        }
+    elif lobe == "families":
         idata, samples, used, lobe_info = lobe_families.fit_lobe_families(
             b,
             curves,
@@ -408,6 +449,8 @@ def estimate_bundle(
         out.summary["sky_families"] = families
     if lobe_info is not None:
         out.summary["lobe_families"] = lobe_info["lobe_families"]
+    if occluder_info is not None:
+        out.summary["occluder_albedos"] = occluder_info["occluder_albedos"]
     return out
 
 

@@ -75,13 +75,24 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
 
 
 def joint_inputs(
-    b, y, usable, censored, keep, illumination, fresnel="none", lobe_family=DEFAULT_LOBE_FAMILY
+    b,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    fresnel="none",
+    lobe_family=DEFAULT_LOBE_FAMILY,
+    occluder_albedo=None,
 ):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` and the frames any of them sees with the sun
-    up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`)
-    and the glossy lobe's family ``lobe_family`` (:data:`bayesgloss.lobes.LOBE_FAMILIES`):
-    (data, frames used (T,) of bool, sky model names)."""
+    up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`),
+    the glossy lobe's family ``lobe_family`` (:data:`bayesgloss.lobes.LOBE_FAMILIES`)
+    and, for a bundle with an ``object_mesh``, its faces' albedo
+    ``occluder_albedo`` (default :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`;
+    :mod:`bayesgloss.occluder_albedo`): (data, frames used (T,) of bool, sky
+    model names)."""
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
@@ -90,7 +101,11 @@ def joint_inputs(
     used = ok.any(axis=0) & b.sun_up
     geometry = b.view_geometry()
     # what a non-convex object's own mesh (object_mesh) hides from each facet
-    mesh = {} if (occlusion := bundle_occlusion(b)) is None else {"occlusion": occlusion}
+    mesh = {}
+    if (occlusion := bundle_occlusion(b)) is not None:
+        if occluder_albedo is not None:  # the map is the same: only its faces' albedo changes
+            occlusion = occlusion.replace(occluder_reflectance=float(occluder_albedo))
+        mesh["occlusion"] = occlusion
     bases = il.illumination_bases(
         geometry,
         day,
@@ -125,7 +140,10 @@ def joint_fit(
     options = dict(options or {})
     fresnel = options.pop("fresnel", DEFAULT_FRESNEL)
     family = check_lobe_family(options.pop("lobe_family", DEFAULT_LOBE_FAMILY))
-    data, used, names = joint_inputs(b, y, usable, censored, keep, illumination, fresnel, family)
+    albedo = options.pop("occluder_albedo", None)
+    data, used, names = joint_inputs(
+        b, y, usable, censored, keep, illumination, fresnel, family, albedo
+    )
     if "max_steps" in options:  # a sweep of the joint sampler is its step
         options.setdefault("max_sweeps", options.pop("max_steps"))
     options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
@@ -188,6 +206,8 @@ def joint_fit(
     )
     idata.posterior.attrs["fresnel"] = fresnel
     idata.posterior.attrs["lobe_family"] = family
+    if albedo is not None:
+        idata.posterior.attrs["occluder_albedo"] = float(albedo)
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)
     idata.observed_data["censored"] = (("facet", "frame"), censored[keep][:, used])
     idata.observed_data["time"] = (

@@ -53,7 +53,13 @@ from .joint_estimate import AUTO_SKIES, add_facet_posteriors, joint_fit
 from .loo import loo_table
 from .pool import process_pool
 
-__all__ = ["FAMILIES", "loo_stacking_weights", "mixture_draws", "fit_families"]
+__all__ = [
+    "FAMILIES",
+    "loo_stacking_weights",
+    "mixture_draws",
+    "mix_posteriors",
+    "fit_families",
+]
 
 #: The candidates ``--sky families`` fits: ``"auto"`` (each frame's shape a
 #: mixture of gensky's, its weights inferred per frame) and gensky's clear,
@@ -108,17 +114,41 @@ def mixture_draws(draws: list, weights, rng: np.random.Generator) -> np.ndarray:
         multinomial with probabilities w (a random subset of them, in
         their order: the chains stay chains).
     """
+    return _select(draws, _mixture_selection(draws[0].shape[:2], weights, rng))
+
+
+def _mixture_selection(shape, weights, rng: np.random.Generator) -> list:
+    """Which draws of which component fill each chain of :func:`mixture_draws`:
+    a list per chain of (component, its sorted draw indices)."""
     w = np.asarray(weights, float)
-    e, s = draws[0].shape[:2]
-    out = np.empty_like(draws[0])
-    for c in range(e):
+    e, s = shape
+    chains = []
+    for _ in range(e):
         counts = rng.multinomial(s, w / w.sum())
-        parts = []
-        for k, m in enumerate(counts):
-            keep = np.sort(rng.choice(s, size=m, replace=False))
-            parts.append(draws[k][c, keep])
-        out[c] = np.concatenate(parts, axis=0)
+        chains.append(
+            [(k, np.sort(rng.choice(s, size=m, replace=False))) for k, m in enumerate(counts)]
+        )
+    return chains
+
+
+def _select(draws: list, selection) -> np.ndarray:
+    """The mixture's draws of one variable given :func:`_mixture_selection`'s choice."""
+    out = np.empty_like(draws[0])
+    for c, parts in enumerate(selection):
+        out[c] = np.concatenate([draws[k][c, keep] for k, keep in parts], axis=0)
     return out
+
+
+def mix_posteriors(idata, components: list, variables, weights, rng: np.random.Generator):
+    """Replace ``variables`` of ``idata.posterior`` by the mixture of the
+    ``components``' (posterior datasets of the same shapes) with ``weights``,
+    one choice of draws for all of them (:func:`mixture_draws`): a draw of the
+    mixture keeps each component draw's variables together."""
+    shape = components[0][variables[0]].values.shape[:2]
+    selection = _mixture_selection(shape, weights, rng)
+    for var in variables:
+        mixed = _select([c[var].values for c in components], selection)
+        idata.posterior[var] = (idata.posterior[var].dims, mixed)
 
 
 def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=None, jobs=1):
@@ -171,20 +201,18 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
     best = FAMILIES[int(np.argmax(weights))]
     idata, samples, used = fits[best]
     add_facet_posteriors(idata, samples, seed)  # of the most-weighted family only
-    rng = np.random.default_rng(seed)
-    for var in ("gamma_object", "n_object"):
-        mixed = mixture_draws([fits[n][0].posterior[var].values for n in FAMILIES], weights, rng)
-        idata.posterior[var] = (idata.posterior[var].dims, mixed)
-    idata.posterior.attrs["sky_family_weights"] = json.dumps(
-        {name: float(w) for name, w in zip(FAMILIES, weights, strict=True)}
-    )
-    idata.posterior.attrs["sky_family_most_weight"] = best
-    families = {
+    families = {  # each family's own gloss, before the mixture replaces the chosen one's
         name: {
             **scores[name],
             "gamma": _quantiles(fits[name][0].posterior["gamma_object"].values, GAMMA_BOUNDS),
         }
         for name in FAMILIES
     }
+    own = [fits[n][0].posterior for n in FAMILIES]
+    mix_posteriors(idata, own, ("gamma_object", "n_object"), weights, np.random.default_rng(seed))
+    idata.posterior.attrs["sky_family_weights"] = json.dumps(
+        {name: float(w) for name, w in zip(FAMILIES, weights, strict=True)}
+    )
+    idata.posterior.attrs["sky_family_most_weight"] = best
     seconds = sum(fit[1].seconds for fit in fits.values()) + samples.facets.seconds
     return idata, samples, used, {"families": families, "most_weight": best, "seconds": seconds}

@@ -1,0 +1,189 @@
+"""One fit per choice of a model's part, stacked by PSIS-LOO under the day's sky.
+
+The glossy lobe's family (:mod:`bayesgloss.lobe_families`) and the albedo of
+a non-convex object's own faces (:mod:`bayesgloss.occluder_albedo`) are
+parts of the one-material model that nobody tells the estimator. Each is
+averaged the same way: the joint model
+(:func:`bayesgloss.joint_estimate.joint_fit`) is fitted once for each choice
+(a value of one of its options), and the object's gloss is the mixture of
+the fits' posteriors with the stacking weights of their leave-one-out
+predictive densities (Yao, Vehtari, Simpson & Gelman 2018;
+:func:`bayesgloss.sky_families.loo_stacking_weights`). A choice the data
+cannot tell from another then widens the object's interval instead of
+biasing it.
+
+The sky is chosen first: with ``illumination="families"`` the sky families
+are stacked with the part's default choice
+(:func:`bayesgloss.sky_families.fit_families`) and the other choices are
+fitted under the most-weighted sky family, so a part of k choices costs
+k - 1 fits more than the sky alone (not k times as many); with a named sky
+(or ``"auto"``) every choice is fitted under it. The default choice's
+component of the mixture keeps the sky mixture's draws.
+"""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import as_completed
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import sky_families
+from .joint_estimate import add_facet_posteriors, joint_fit
+from .pool import process_pool
+
+__all__ = ["StackedFits", "fit_stacked"]
+
+#: Posterior variables of the object that the stacked mixture replaces.
+MIXED = ("gamma_object", "n_object", "roughness_object")
+
+
+@dataclass
+class StackedFits:
+    """The fits of :func:`fit_stacked` and their stacking.
+
+    Attributes
+    ----------
+    idata : arviz.InferenceData
+        The most-weighted choice's fit (with its facets' posteriors), its
+        object variables (:data:`MIXED`, where every fit has them) replaced
+        by the stacked mixture's draws; the posterior's attributes
+        ``<attribute>_weights`` (JSON) and ``<attribute>_most_weight``.
+    samples : bayesgloss.sampling.JointSamples
+        The most-weighted choice's run.
+    used : ndarray of bool
+        Frames used.
+    fits : dict of str to tuple
+        Each choice's (idata, samples, used); the most-weighted one's idata
+        is ``idata``.
+    own : dict of str to xarray.Dataset
+        Each choice's own posterior, before the mixture.
+    scores : dict of str to dict
+        Each choice's :func:`~bayesgloss.sky_families.loo_stacking_weights` entry.
+    best : str
+        The most-weighted choice.
+    sky : dict or None
+        Where the sky was stacked, :func:`~bayesgloss.sky_families.fit_families`'s
+        record (``families``, ``most_weight``).
+    seconds : float
+        Sampling time of every fit.
+    """
+
+    idata: object
+    samples: object
+    used: np.ndarray
+    fits: dict
+    own: dict
+    scores: dict
+    best: str
+    sky: dict | None
+    seconds: float
+
+
+def _fit_each(args, illumination, seed, options, choices, progress, jobs):
+    """joint_fit of each choice (label to options) under one sky: {label: fit}."""
+    fits = {}
+    if jobs > 1 and len(choices) > 1:
+        with process_pool(min(jobs, len(choices))) as pool:
+            futures = {
+                pool.submit(joint_fit, *args, illumination, seed, opts, facets=False): label
+                for label, opts in choices.items()
+            }
+            for done, future in enumerate(as_completed(futures), 1):
+                fits[futures[future]] = future.result()
+                if progress is not None:
+                    progress(done, len(choices))
+    else:
+        for label, opts in choices.items():
+            fits[label] = joint_fit(*args, illumination, seed, opts, facets=False)
+            if progress is not None:
+                progress(len(fits), len(choices))
+    return fits
+
+
+def fit_stacked(
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    seed,
+    options,
+    *,
+    option,
+    choices,
+    default,
+    attribute,
+    progress=None,
+    jobs=1,
+) -> StackedFits:
+    """The joint model once per choice of one option, stacked (module docstring).
+
+    Parameters
+    ----------
+    b, curves, y, usable, censored, keep
+        As :func:`bayesgloss.joint_estimate.joint_fit`'s.
+    illumination : str
+        A sky model, ``"auto"`` or ``"families"``.
+    seed : int
+    options : dict
+        Sampler options; ``option`` is set per fit.
+    option : str
+        The option of :func:`~bayesgloss.joint_estimate.joint_fit` that
+        varies (``"lobe_family"``, ``"occluder_albedo"``).
+    choices : dict of str to object
+        Label to the option's value, in the order of the results.
+    default : str
+        The label fitted with the sky families where they are stacked.
+    attribute : str
+        Prefix of the posterior's attributes that record the weights.
+    progress : callable, optional
+        Called with (fits done, fits) for the fits under the chosen sky.
+    jobs : int
+        Fits at once in worker processes.
+    """
+    args = (b, curves, y, usable, censored, keep)
+    options = {k: v for k, v in options.items() if k != option}
+    labels = list(choices)
+
+    def opts(label):
+        return {**options, option: choices[label]}
+
+    seconds, sky_info = 0.0, None
+    if illumination == "families":
+        first = sky_families.fit_families(*args, seed, opts(default), None, jobs)
+        sky_info = first[3]
+        seconds += sky_info.pop("seconds")
+        others = {label: opts(label) for label in labels if label != default}
+        fits = {default: first[:3]}
+        fits.update(_fit_each(args, sky_info["most_weight"], seed, options, others, progress, jobs))
+    else:
+        fits = _fit_each(
+            args, illumination, seed, options, {k: opts(k) for k in labels}, progress, jobs
+        )
+    own = {label: fits[label][0].posterior.copy(deep=True) for label in labels}
+    scores = sky_families.loo_stacking_weights({label: fits[label][0] for label in labels})
+    weights = np.array([scores[label]["weight"] for label in labels])
+    best = labels[int(np.argmax(weights))]
+    idata, samples, used = fits[best]
+    if "gamma" not in idata.posterior:  # facets' own posteriors of the chosen fit only
+        add_facet_posteriors(idata, samples, seed)
+    for label, fit in fits.items():
+        if label != default or sky_info is None:
+            seconds += fit[1].seconds
+    seconds += samples.facets.seconds
+    mixed = [v for v in MIXED if all(v in own[k] for k in labels)]
+    sky_families.mix_posteriors(
+        idata, [own[k] for k in labels], mixed, weights, np.random.default_rng(seed)
+    )
+    if sky_info is not None and best != default:  # keep the sky's record
+        for key in ("sky_family_weights", "sky_family_most_weight"):
+            idata.posterior.attrs[key] = own[default].attrs[key]
+    idata.posterior.attrs[f"{attribute}_weights"] = json.dumps(
+        {label: float(w) for label, w in zip(labels, weights, strict=True)}
+    )
+    idata.posterior.attrs[f"{attribute}_most_weight"] = best
+    return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds)
