@@ -931,8 +931,9 @@ def read_bundle(path: str | os.PathLike) -> Bundle:
         warnings.warn(
             f"bundle '{path}': object_mesh '{parsed.object_mesh}' enters the forward model "
             "(bayesgloss.visibility): the sun, sky and ground it hides from each facet; the "
-            "light its faces reflect is modelled as from a Lambertian of albedo 0.5, "
-            "and frames where it shadows part of a facet are left out",
+            "light its faces reflect is modelled as from Lambertian faces of one albedo "
+            "(0.5, or stacked with estimate --occluder-albedo stacked), and frames where it "
+            "shadows part of a facet are left out",
             BundleWarning,
             stacklevel=2,
         )
