@@ -111,6 +111,7 @@ from .occluder_albedo import (
     fit_occluder_albedos,
 )
 from .pooling import population_gloss, shared_gloss
+from .render import OCCLUDER_REFLECTANCE
 from .results import (
     RESULT_FILES,
     EstimateResult,
@@ -309,8 +310,9 @@ def estimate_bundle(
         its faces' albedo fixed at :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`,
         or one fit per albedo of :data:`bayesgloss.occluder_albedo.OCCLUDER_ALBEDOS`
         stacked by PSIS-LOO (:mod:`bayesgloss.occluder_albedo`); default
-        :data:`bayesgloss.occluder_albedo.DEFAULT_OCCLUDER_ALBEDO`. Without a
-        mesh it changes nothing.
+        :data:`bayesgloss.occluder_albedo.DEFAULT_OCCLUDER_ALBEDO`, and
+        ``"fixed"`` with ``lobe="families"`` (one stack at a time; asking for
+        both is an error). Without a mesh it changes nothing.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -350,7 +352,9 @@ def estimate_bundle(
         sampler_options["fresnel"] = fresnel
         if lobe != "families":
             sampler_options["lobe_family"] = lobe
-    occluder = check_occluder_albedo_mode(occluder_albedo or DEFAULT_OCCLUDER_ALBEDO)
+    if occluder_albedo is None:  # the lobe families' stack keeps the faces at one albedo
+        occluder_albedo = "fixed" if lobe == "families" else DEFAULT_OCCLUDER_ALBEDO
+    occluder = check_occluder_albedo_mode(occluder_albedo)
     stack_occluder = occluder == "stacked" and joint and bool(b.manifest.get("object_mesh"))
     if stack_occluder and lobe == "families":
         raise ValueError(
@@ -570,6 +574,13 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         summary["lobe_family"] = post.attrs.get(
             "lobe_family_most_weight", post.attrs.get("lobe_family", "phong")
         )
+        if b.manifest.get("object_mesh"):  # its faces' albedo: the most-weighted, or fixed
+            summary["occluder_albedo"] = float(
+                post.attrs.get(
+                    "occluder_albedo_most_weight",
+                    post.attrs.get("occluder_albedo", OCCLUDER_REFLECTANCE),
+                )
+            )
         if "roughness_object" in post:  # the lobe family's microfacet roughness
             summary["object"]["roughness"] = _quantiles(post["roughness_object"].values)
         states = post["sun_state_weight"].values.mean(axis=(0, 1))

@@ -96,6 +96,8 @@ interval held the truth with 0.5 (0.257 [0.213, 0.305], 0.686 [0.666,
 0.704]) and with each render's own value (0.302, 0.670), and missed it with
 0.2 (0.373 and 0.733, both too glossy); the convex model of before held it
 with wider intervals (0.274 [0.194, 0.368], 0.715 [0.663, 0.759]).
+``estimate`` does not fix it: it stacks fits at several albedos
+(:mod:`bayesgloss.occluder_albedo`).
 ``occlusion=None`` is the convex model, bit for bit.
 
 Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).

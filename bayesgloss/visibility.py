@@ -98,7 +98,8 @@ which earlier versions set to leave out wholly shadowed entries, is no
 longer set.)
 
 Limitations: the mesh's faces reflect as Lambertian surfaces of one albedo
-(``occluder_reflectance``, 0.5 unless given: 0.2 for a building of 0.5
+(``occluder_reflectance``, 0.5 unless given, and stacked over 0.2, 0.5 and
+0.8 by ``estimate``, :mod:`bayesgloss.occluder_albedo`: 0.2 for a building of 0.5
 misplaced sun-lit courtyard walls by 10 % against rtrace, and made
 ``estimate`` too glossy on two renders of the L building, 0.373 for 0.270
 and 0.733 for 0.667, where 0.5 held both truths:

@@ -91,10 +91,9 @@ def test_stacking_names_the_albedo_of_the_faces(bright_faces, tmp_path):
     # take nearly all the weight (in trials the others were 40+ nats behind),
     # and the object's own interval hold the truth. Were the option not passed
     # to the fits, they would be one fit thrice, each weight about 1/3.
-    res = estimate.estimate_bundle(
+    res = estimate.estimate_bundle(  # stacked: the default where the bundle has a mesh
         bright_faces,
         illumination="gensky-clear",
-        occluder_albedo="stacked",
         jobs=2,
         sampler_options={"max_steps": 500},
     )
@@ -103,6 +102,7 @@ def test_stacking_names_the_albedo_of_the_faces(bright_faces, tmp_path):
     assert list(weights) == [f"{a:g}" for a in OCCLUDER_ALBEDOS]
     assert weights["0.8"] > 0.9
     assert res.idata.posterior.attrs["occluder_albedo_most_weight"] == "0.8"
+    assert s["occluder_albedo"] == 0.8
     g = s["object"]["gamma_within_model"]
     assert g["q05"] <= GAMMA <= g["q95"]
 
