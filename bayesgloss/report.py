@@ -222,7 +222,7 @@ def posterior_report(
     ax.set(xlabel="gamma [-]", ylabel="facets", title="(d) object gloss", xlim=(0, 1))
     ax.legend(fontsize=8, loc="upper center")
     weights = _model_weights(summary)
-    if weights:  # the stacked sky and lobe families' weights
+    if weights:  # the stacked sky, lobe and faces' albedo weights
         ax.text(0.02, 0.02, weights, transform=ax.transAxes, fontsize=7, va="bottom", ha="left")
 
     # (e) three facets: the least and most glossy and the middle one, with bands
@@ -275,8 +275,9 @@ def posterior_report(
 
 
 def _model_weights(summary) -> str:
-    """Lines of the stacking weights of the sky families and the lobe families
-    (``estimate``'s ``sky_families`` and ``lobe_families``), empty where none."""
+    """Lines of the stacking weights of the sky families, the lobe families and
+    a mesh's faces' albedos (``estimate``'s ``sky_families``, ``lobe_families``
+    and ``occluder_albedos``), empty where none."""
     lines = []
     sky = summary.get("sky_families", {}).get("families")
     if sky:
@@ -284,6 +285,11 @@ def _model_weights(summary) -> str:
     lobes = summary.get("lobe_families")
     if lobes:
         lines.append("lobe: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in lobes.items()))
+    faces = summary.get("occluder_albedos")
+    if faces:
+        lines.append(
+            "faces' albedo: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in faces.items())
+        )
     return "\n".join(lines)
 
 

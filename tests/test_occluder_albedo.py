@@ -138,3 +138,12 @@ def test_mixture_keeps_each_draws_variables_together():
     share = np.isclose(diff, 10).mean()
     # 400 draws at 0.7: the binomial sd is 0.023, so 0.1 is over 4 sd
     assert abs(share - 0.7) < 0.1
+
+
+def test_report_names_the_faces_albedo_weights():
+    from bayesgloss import report
+
+    summary = {
+        "occluder_albedos": {"0.2": {"weight": 0.9}, "0.5": {"weight": 0.1}, "0.8": {"weight": 0.0}}
+    }
+    assert report._model_weights(summary) == "faces' albedo: 0.2 0.90, 0.5 0.10, 0.8 0.00"
