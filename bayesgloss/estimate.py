@@ -601,6 +601,7 @@ def estimate_unit(
     bundle_content: str | None = None,
     fresnel: str | None = None,
     lobe: str | None = None,
+    occluder_albedo: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -610,7 +611,8 @@ def estimate_unit(
     bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
-    changed since is an error. ``fresnel`` and ``lobe``: as :func:`estimate_bundle`'s
+    changed since is an error. ``fresnel``, ``lobe`` and ``occluder_albedo``:
+    as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -631,5 +633,6 @@ def estimate_unit(
         sampler_options={"max_steps": max_steps},
         fresnel=fresnel,
         lobe=lobe,
+        occluder_albedo=occluder_albedo,
     )
     return result_files(res)

@@ -147,3 +147,38 @@ def test_report_names_the_faces_albedo_weights():
         "occluder_albedos": {"0.2": {"weight": 0.9}, "0.5": {"weight": 0.1}, "0.8": {"weight": 0.0}}
     }
     assert report._model_weights(summary) == "faces' albedo: 0.2 0.90, 0.5 0.10, 0.8 0.00"
+
+
+def test_several_bundles_carry_the_occluder_albedo_into_their_units(tmp_path, monkeypatch):
+    # estimate over several bundles runs each as a unit of work: the option must
+    # reach each unit's options and, through estimate_unit, estimate_bundle (a
+    # unit function without the parameter fails on the key)
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import cli, runner
+
+    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
+    units = []
+
+    class Stop(Exception):
+        pass
+
+    def plan(func, planned, out, **kwargs):
+        units.extend(planned)
+        raise Stop
+
+    monkeypatch.setattr(runner, "run_units", plan)
+    args = ["estimate", *map(str, paths), "--out", str(tmp_path / "out"), "--quiet"]
+    with pytest.raises(Stop):
+        cli.main([*args, "--occluder-albedo", "fixed"])
+    assert [options["occluder_albedo"] for _, options in units] == ["fixed", "fixed"]
+    seen = {}
+
+    def fake_estimate(b, **kwargs):
+        seen.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(estimate, "estimate_bundle", fake_estimate)
+    with pytest.raises(Stop):
+        estimate.estimate_unit(**units[0][1])
+    assert seen["occluder_albedo"] == "fixed"
