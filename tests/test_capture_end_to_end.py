@@ -273,6 +273,8 @@ JPEG_SATURATION = (
 )
 
 
+# Stop 31, the faces' albedo stacked: it passed once (made 0.740 [0.695, 0.772],
+# renderer's 0.735 [0.707, 0.769]); kept marked until it passes again.
 @pytest.mark.radiance
 @pytest.mark.slow
 @pytest.mark.xfail(reason=JPEG_SATURATION, strict=False)
