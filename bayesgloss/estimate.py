@@ -361,30 +361,16 @@ def estimate_bundle(
             "occluder albedo 'stacked' and lobe 'families' each fit and stack several "
             "models; name a lobe, or fix the occluder albedo"
         )
-    families = lobe_info = occluder_info = None
+    # a part of the model fitted once per choice and stacked: (fitter, what, summary key)
+    stacked = None
     if stack_occluder:
-        idata, samples, used, occluder_info = fit_occluder_albedos(
-            b,
-            curves,
-            y,
-            usable,
-            censored,
-            keep,
-            illumination,
-            seed,
-            sampler_options,
-            progress,
-            jobs,
-        )
-        families = occluder_info.pop("sky_families", None)
-        run = {
-            "seconds": occluder_info.pop("seconds"),
-            "sweeps": samples.n_sweeps,
-            "facet_seconds": samples.facets.seconds,
-            "model": "joint, one fit per occluder albedo (and sky family), stacked",
-        }
+        stacked = fit_occluder_albedos, "occluder albedo", "occluder_albedos"
     elif lobe == "families":
-        idata, samples, used, lobe_info = lobe_families.fit_lobe_families(
+        stacked = lobe_families.fit_lobe_families, "lobe family", "lobe_families"
+    families = part = None
+    if stacked is not None:
+        fit, what, key = stacked
+        idata, samples, used, info = fit(
             b,
             curves,
             y,
@@ -397,12 +383,13 @@ def estimate_bundle(
             progress,
             jobs,
         )
-        families = lobe_info.pop("sky_families", None)
+        families = info.pop("sky_families", None)
+        part = key, info[key]
         run = {
-            "seconds": lobe_info.pop("seconds"),
+            "seconds": info.pop("seconds"),
             "sweeps": samples.n_sweeps,
             "facet_seconds": samples.facets.seconds,
-            "model": "joint, one fit per lobe family (and sky family), stacked",
+            "model": f"joint, one fit per {what} (and sky family), stacked",
         }
     elif illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
@@ -451,10 +438,8 @@ def estimate_bundle(
     out = _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
     if families is not None:
         out.summary["sky_families"] = families
-    if lobe_info is not None:
-        out.summary["lobe_families"] = lobe_info["lobe_families"]
-    if occluder_info is not None:
-        out.summary["occluder_albedos"] = occluder_info["occluder_albedos"]
+    if part is not None:  # each choice's weight, LOO and own gloss
+        out.summary[part[0]] = part[1]
     return out
 
 

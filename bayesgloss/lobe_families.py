@@ -24,7 +24,6 @@ is each family's Phong-equivalent exponent (:func:`bayesgloss.lobes.roughness_of
 
 from __future__ import annotations
 
-from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .lobes import LOBE_FAMILIES, roughness_of_exponent
 from .stacking import fit_stacked
@@ -87,16 +86,14 @@ def fit_lobe_families(
     )
     # the families' microfacet roughness differ in meaning; the mixture keeps none
     stack.idata.posterior = stack.idata.posterior.drop_vars("roughness_object", errors="ignore")
-    families = {}
-    for n in LOBE_FAMILIES:
-        entry = {
-            **stack.scores[n],
-            "gamma": _quantiles(stack.own[n]["gamma_object"].values, GAMMA_BOUNDS),
-        }
-        if n != "phong":
-            entry["roughness"] = _quantiles(roughness_of_exponent(stack.own[n]["n_object"].values))
-        families[n] = entry
-    info = {"lobe_families": families, "lobe_family": stack.best, "seconds": stack.seconds}
-    if stack.sky is not None:
-        info["sky_families"] = stack.sky
-    return stack.idata, stack.samples, stack.used, info
+    families = stack.entries()
+    for n in (n for n in LOBE_FAMILIES if n != "phong"):  # microfacet families only
+        families[n]["roughness"] = _quantiles(
+            roughness_of_exponent(stack.own[n]["n_object"].values)
+        )
+    return (
+        stack.idata,
+        stack.samples,
+        stack.used,
+        stack.record("lobe_families", families, "lobe_family", stack.best),
+    )

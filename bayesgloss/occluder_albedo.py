@@ -39,8 +39,6 @@ A bundle without a mesh has no faces to see: the option changes nothing.
 
 from __future__ import annotations
 
-from .intervals import GAMMA_BOUNDS
-from .intervals import posterior_quantiles as _quantiles
 from .render import OCCLUDER_REFLECTANCE
 from .stacking import fit_stacked
 
@@ -126,18 +124,5 @@ def fit_occluder_albedos(
         progress=progress,
         jobs=jobs,
     )
-    albedos = {
-        k: {
-            **stack.scores[k],
-            "gamma": _quantiles(stack.own[k]["gamma_object"].values, GAMMA_BOUNDS),
-        }
-        for k in choices
-    }
-    info = {
-        "occluder_albedos": albedos,
-        "occluder_albedo": choices[stack.best],
-        "seconds": stack.seconds,
-    }
-    if stack.sky is not None:
-        info["sky_families"] = stack.sky
+    info = stack.record("occluder_albedos", stack.entries(), "occluder_albedo", choices[stack.best])
     return stack.idata, stack.samples, stack.used, info

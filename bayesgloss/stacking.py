@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import sky_families
+from .intervals import GAMMA_BOUNDS
+from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import add_facet_posteriors, joint_fit
 from .pool import process_pool
 
@@ -79,6 +81,25 @@ class StackedFits:
     best: str
     sky: dict | None
     seconds: float
+
+    def entries(self) -> dict:
+        """Per choice, in the choices' order: its stacking scores and the
+        quantiles of its own ``gamma_object``."""
+        return {
+            label: {
+                **self.scores[label],
+                "gamma": _quantiles(own["gamma_object"].values, GAMMA_BOUNDS),
+            }
+            for label, own in self.own.items()
+        }
+
+    def record(self, key: str, entries: dict, best_key: str, best) -> dict:
+        """The wrappers' ``info``: ``entries`` under ``key``, the most-weighted
+        choice under ``best_key``, ``seconds``, and ``sky_families`` where stacked."""
+        info = {key: entries, best_key: best, "seconds": self.seconds}
+        if self.sky is not None:
+            info["sky_families"] = self.sky
+        return info
 
 
 def _fit_each(args, illumination, seed, options, choices, progress, jobs):
