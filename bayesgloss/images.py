@@ -611,7 +611,12 @@ def read_raw(path: str | os.PathLike, white_balance: str = "camera") -> np.ndarr
     (``gamma=(1, 1)``), no automatic brightening and the image as stored
     (``user_flip=0``: EXIF orientation not applied, as for other photos):
     each output value is a fixed linear combination of the raw values, so
-    pixel ratios are radiance ratios. Saturated photosites clip at the top
+    pixel ratios are radiance ratios. The scale is the file's white level,
+    never the frame's own brightest value (LibRaw's default
+    ``adjust_maximum_thr=0.75`` rescales any frame whose maximum exceeds 75 %
+    of white to its maximum, which would decode a frame 10 % darker than
+    another near saturation as equally bright: time-lapse frames must keep
+    their ratios). Saturated photosites clip at the top
     code (65535), which the bundle reader flags.
 
     Parameters
@@ -649,6 +654,7 @@ def read_raw(path: str | os.PathLike, white_balance: str = "camera") -> np.ndarr
             rgb = raw.postprocess(
                 gamma=(1.0, 1.0),  # linear: no transfer curve
                 no_auto_bright=True,
+                adjust_maximum_thr=0.0,  # the file's white level, never the frame's own maximum
                 output_bps=16,
                 use_camera_wb=white_balance == "camera",
                 use_auto_wb=False,

@@ -901,6 +901,28 @@ def test_raw_is_decoded_linearly(tmp_path):
         images.read_raw(tmp_path / "bad.nef")
 
 
+def test_raw_frames_near_white_keep_their_ratio(tmp_path):
+    # Two frames of one scene whose brightest photosites sit at 95 % and 81 % of the white
+    # level. LibRaw's default (adjust_maximum_thr 0.75) scales each frame to its own
+    # maximum, which would decode both as equally bright (ratio ~1.0); a linear decode
+    # keeps the exposure ratio 1 / 0.85 = 1.176 and the absolute codes of the scene.
+    pytest.importorskip("rawpy")
+    from bayesgloss import images
+
+    h, w = 36, 48
+    scene = np.broadcast_to(0.05 + 0.9 * np.linspace(0, 1, w), (h, w))  # up to 0.95 of white
+    # a neutral of 1 in every channel, so that the white-balanced grey stays below white
+    one = write_dng(tmp_path / "one.dng", bayer(scene, 1.0, neutral=(1, 1, 1)), neutral=(1, 1, 1))
+    dim = write_dng(tmp_path / "dim.dng", bayer(scene, 0.85, neutral=(1, 1, 1)), neutral=(1, 1, 1))
+    a, b = images.read_raw(one).astype(float), images.read_raw(dim).astype(float)
+    inner = (slice(2, -2), slice(2, -2))
+    ratio = a[inner] / b[inner]
+    print(f"pixel ratio of exposures 1 and 0.85: {ratio.min():.4f} - {ratio.max():.4f}")
+    np.testing.assert_allclose(ratio, 1 / 0.85, rtol=0.01)  # rounding of 14-bit codes
+    want = np.broadcast_to(65535 * scene[inner][..., None], a[inner].shape)
+    np.testing.assert_allclose(a[inner], want, rtol=0.005, atol=3)
+
+
 def test_raw_exif_from_its_tiff_tags_and_from_libraw(tmp_path):
     pytest.importorskip("rawpy")
     p = write_dng(tmp_path / "a.dng", bayer(np.full((32, 32), 0.3), 1.0),
