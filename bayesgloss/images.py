@@ -8,7 +8,8 @@ byte of 16-bit RGB), TIFF through tifffile, OpenEXR through the optional
 ``rawpy`` (LibRaw; :func:`read_raw`, for ``bundle make``), and the pixel
 encodings of the bundle spec (``linear-radiance``, ``linear``, ``srgb``,
 ``gamma:G``, ``unknown``).
-:mod:`bayesgloss.bundle` re-exports every public name here.
+:mod:`bayesgloss.bundle` re-exports the codecs of a bundle's own images (RAW
+files are photos for ``bundle make``, never a bundle's frames).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = [
     "RAW_SUFFIXES",
     "ImageInfo",
     "decode_pixels",
+    "decode_raw_linear",
     "float_to_rgbe",
     "image_info",
     "image_kind",
@@ -602,6 +604,39 @@ def image_info(path: str | os.PathLike) -> ImageInfo:
     )
 
 
+def decode_raw_linear(raw, white_balance: str = "camera") -> np.ndarray:
+    """An open ``rawpy.RawPy`` decoded as :func:`read_raw` decodes a file.
+
+    The one place that holds LibRaw's options for a linear decode, so that a
+    check can decode a RAW file's own data changed in memory (e.g. scaled,
+    ``studies/raw_check.py``) exactly as ``bundle make`` decodes photos.
+
+    Parameters
+    ----------
+    raw : rawpy.RawPy
+        An open RAW file (``rawpy.imread``). -
+    white_balance : {"camera", "daylight"}
+        As :func:`read_raw`. -
+
+    Returns
+    -------
+    ndarray (H, W, 3) of uint16
+        Linear RGB codes [-].
+    """
+    import rawpy
+
+    return raw.postprocess(
+        gamma=(1.0, 1.0),  # linear: no transfer curve
+        no_auto_bright=True,
+        adjust_maximum_thr=0.0,  # the file's white level, never the frame's own maximum
+        output_bps=16,
+        use_camera_wb=white_balance == "camera",
+        use_auto_wb=False,
+        user_flip=0,
+        output_color=rawpy.ColorSpace.sRGB,
+    )
+
+
 def read_raw(path: str | os.PathLike, white_balance: str = "camera") -> np.ndarray:
     """A camera RAW file decoded linearly by LibRaw (``rawpy``): RGB linear in radiance.
 
@@ -651,16 +686,7 @@ def read_raw(path: str | os.PathLike, white_balance: str = "camera") -> np.ndarr
     path = Path(path)
     try:
         with rawpy.imread(os.fspath(path)) as raw:
-            rgb = raw.postprocess(
-                gamma=(1.0, 1.0),  # linear: no transfer curve
-                no_auto_bright=True,
-                adjust_maximum_thr=0.0,  # the file's white level, never the frame's own maximum
-                output_bps=16,
-                use_camera_wb=white_balance == "camera",
-                use_auto_wb=False,
-                user_flip=0,
-                output_color=rawpy.ColorSpace.sRGB,
-            )
+            rgb = decode_raw_linear(raw, white_balance)
     except (rawpy.LibRawError, rawpy.NotSupportedError) as err:
         reason = err.args[0] if err.args else type(err).__name__
         if isinstance(reason, bytes):  # LibRaw's message, as rawpy passes it
