@@ -69,6 +69,7 @@ import shutil
 import sys
 import tempfile
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,6 +86,9 @@ __all__ = [
     "CIE_CAL",
     "paper_configs",
     "render_bundles",
+    "RenderWarning",
+    "warn_lambertian_indirect_gloss",
+    "RTRACE_SPECULAR_THRESHOLD",
     "camera_rays",
     "opencv_camera",
     "label_image",
@@ -138,6 +142,9 @@ DEFAULT_AMBIENT = (
 #: any specularity (measured in ``tests/test_reflectance.py``). For new
 #: validation sets.
 TRACED_SPECULAR_AMBIENT = (*DEFAULT_AMBIENT, "-st", "0")
+
+#: rtrace's specular sampling threshold where ``-st`` is not given [-].
+RTRACE_SPECULAR_THRESHOLD = 0.15
 
 #: Sky names of :class:`SequenceConfig` (``cie-N``: the CIE standard general skies).
 SKIES = (
@@ -611,7 +618,30 @@ class SequenceConfig:
             "pixel_encoding": self.pixel_encoding,
             "bit_depth": None if name == "linear-radiance" else self._bit_depth(),
             "sensor_noise": self.sensor_noise,
+            "lambertian_indirect_gloss": self.lambertian_indirect_gloss(),
         }
+
+    def specular_threshold(self) -> float:
+        """rtrace's ``-st`` in :attr:`ambient` (the last one given), else
+        :data:`RTRACE_SPECULAR_THRESHOLD`."""
+        options = list(self.ambient)
+        values = [options[i + 1] for i, o in enumerate(options[:-1]) if o == "-st"]
+        return float(values[-1]) if values else RTRACE_SPECULAR_THRESHOLD
+
+    def lambertian_indirect_gloss(self) -> bool:
+        """Whether Radiance renders this material's reflection of the sky,
+        the ground and the object itself as Lambertian.
+
+        Radiance's ``normal.c`` sets SP_RBLT on a rough material (roughness
+        > 0) whose specularity is at most the specular threshold
+        (``specthresh >= rspec - FTINY``): it then skips the specular
+        sampling of indirect light and reflects all of it through the
+        diffuse ambient with the full material colour. Only light sources
+        (the sun) keep the glossy lobe, so the images show less gloss than
+        the material's true gamma says.
+        """
+        rough = self.roughness > 0 and self.specularity > 0
+        return bool(rough and self.specular_threshold() >= self.specularity - 1e-9)
 
     def _bit_depth(self) -> int:
         name, _ = images.parse_pixel_encoding(self.pixel_encoding)
@@ -870,6 +900,32 @@ def _render_frame(scene_text: str, sky_text: str, rays: np.ndarray, ambient) -> 
         return radiance.rtrace(octree, rays[:, :3], rays[:, 3:], ambient)
 
 
+class RenderWarning(UserWarning):
+    """A render that will not show what its config's truth says."""
+
+
+def warn_lambertian_indirect_gloss(configs) -> None:
+    """One :class:`RenderWarning` naming the configs whose material Radiance
+    will render with Lambertian indirect gloss
+    (:meth:`SequenceConfig.lambertian_indirect_gloss`)."""
+    names = [
+        f"{c.name} (specularity {c.specularity:g}, -st {c.specular_threshold():g})"
+        for c in configs
+        if c.lambertian_indirect_gloss()
+    ]
+    if names:
+        warnings.warn(
+            f"{len(names)} sequence(s) of a rough material no more specular than rtrace's "
+            f"specular threshold: {', '.join(names)}. Radiance renders their sky's and "
+            "ground's reflection as Lambertian (normal.c's SP_RBLT), so the images show "
+            "less gloss than their truth; render with '-st 0' "
+            "(sequences.TRACED_SPECULAR_AMBIENT). Recorded as the bundle truth's "
+            "'lambertian_indirect_gloss'.",
+            RenderWarning,
+            stacklevel=3,
+        )
+
+
 def render_bundles(configs, cache_dir, *, jobs: int = 2, progress: bool = True) -> list[Path]:
     """Render sequences into bundles (cached by configuration hash).
 
@@ -895,6 +951,7 @@ def render_bundles(configs, cache_dir, *, jobs: int = 2, progress: bool = True) 
     cache_dir.mkdir(parents=True, exist_ok=True)
     paths = [_bundle_dir(cache_dir, c) for c in configs]
     todo = [c for c, p in zip(configs, paths, strict=True) if not (p / "sequence.json").exists()]
+    warn_lambertian_indirect_gloss(todo)
     groups: dict[str, list[SequenceConfig]] = {}
     for c in todo:
         groups.setdefault(c.scene_key(), []).append(c)

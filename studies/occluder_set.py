@@ -15,7 +15,8 @@ seed :data:`SEED`, in one fixed order (:func:`draw_configs`):
 - grey Radiance plastic of colour 0.1-0.9 and specularity 0.02-0.4, half of
   them rough (0.02-0.08);
 - gensky's clear sky, linear radiance, rtrace at -ab 3 (the faces' light on
-  each other rendered, not modelled).
+  each other rendered, not modelled) and -st 0 (every rough specular
+  reflection traced; :data:`AMBIENT`).
 
 Each bundle is scored once with ``estimate --sky gensky-clear`` (the sky is
 not what this tests) and default sampler options, with the faces' albedo
@@ -41,9 +42,15 @@ import numpy as np
 SEED = 20261128
 #: Sequences in the set.
 N_SEQUENCES = 6
-#: Radiance's ambient options: -ab 3 so the faces light each other.
+#: Radiance's ambient options: -ab 3 so the faces light each other, and -st 0 so
+#: that every rough specular reflection is traced. The first run (stop 31,
+#: ``results/occluder_set_st015.json``, ``--specular-threshold 0.15``) left
+#: rtrace's default -st 0.15: Radiance's ``normal.c`` then renders the sky's
+#: and ground's reflection of a rough material of specularity <= 0.15 as
+#: Lambertian (only the sun keeps its lobe), which made three of its six
+#: plastics (occ01, occ03, occ05) matt in every frame but the sun's highlight.
 AMBIENT = ("-ab", "3", "-aa", "0.1", "-ar", "512", "-ad", "512", "-as", "256", "-lr", "6",
-           "-lw", "1e-4", "-u-")  # fmt: skip
+           "-lw", "1e-4", "-u-", "-st", "0")  # fmt: skip
 METHODS = ("fixed", "stacked")
 #: What of each config the results file keeps.
 CONFIG_FIELDS = ("name", "latitude", "longitude", "date", "view", "camera_distance",
@@ -51,8 +58,17 @@ CONFIG_FIELDS = ("name", "latitude", "longitude", "date", "view", "camera_distan
 HERE = Path(__file__).parent
 
 
-def draw_configs(out: Path) -> list:
-    """The set's sequences (module docstring), their OBJ files written into ``out``."""
+def _ambient(specular_threshold: float) -> tuple:
+    """:data:`AMBIENT` at rtrace's ``-st specular_threshold`` (0.15, rtrace's
+    default, as the first run wrote it: without ``-st``)."""
+    if specular_threshold == 0.15:
+        return AMBIENT[:-2]
+    return (*AMBIENT[:-1], f"{specular_threshold:g}")
+
+
+def draw_configs(out: Path, specular_threshold: float = 0.0) -> list:
+    """The set's sequences (module docstring), their OBJ files written into
+    ``out``, rendered with rtrace's ``-st specular_threshold``."""
     from bayesgloss import geometry, sequences
 
     rng = np.random.default_rng(SEED)
@@ -93,7 +109,7 @@ def draw_configs(out: Path) -> list:
                 specularity=round(spec, 3),
                 roughness=round(rough, 3),
                 pixel_encoding="linear-radiance",
-                ambient=AMBIENT,
+                ambient=_ambient(specular_threshold),
             )
         )
     return configs
@@ -154,9 +170,16 @@ def main(argv=None) -> dict:
     p.add_argument("--out", default=str(HERE / "out" / "occluder_set"))
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--render-only", action="store_true")
+    p.add_argument(
+        "--specular-threshold",
+        type=float,
+        default=0.0,
+        help="rtrace's -st (default 0: every rough specular reflection traced; the first "
+        "run's 0.15 writes results/occluder_set_st015.json)",
+    )
     args = p.parse_args(argv)
     out = Path(args.out)
-    configs = draw_configs(out / "meshes")
+    configs = draw_configs(out / "meshes", args.specular_threshold)
     paths = sequences.render_bundles(configs, out / "bundles", jobs=args.jobs)
     if args.render_only:
         return {}
@@ -172,6 +195,7 @@ def main(argv=None) -> dict:
         print(json.dumps(row), flush=True)
     result = {
         "seed": SEED,
+        "specular_threshold": args.specular_threshold,
         "configs": [
             {k: getattr(c, k) for k in CONFIG_FIELDS} | {"mesh_file": Path(c.mesh_file).name}
             for c in configs
@@ -181,7 +205,10 @@ def main(argv=None) -> dict:
     }
     results = HERE / "results"
     results.mkdir(exist_ok=True)
-    (results / "occluder_set.json").write_text(json.dumps(result, indent=1) + "\n")
+    name = "occluder_set"
+    if args.specular_threshold != 0:
+        name += f"_st{args.specular_threshold:g}".replace(".", "")
+    (results / f"{name}.json").write_text(json.dumps(result, indent=1) + "\n")
     print(json.dumps(result["totals"], indent=1))
     return result
 

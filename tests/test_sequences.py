@@ -370,6 +370,42 @@ def validation_pair(tmp_path_factory):
     return dict(zip(names, zip([srgb, radiance_twin, gem, matt], paths, strict=True), strict=True))
 
 
+def test_lambertian_indirect_gloss_is_flagged_where_rtrace_skips_specular_sampling(
+    tmp_path, monkeypatch
+):
+    # normal.c: a rough material of specularity <= -st (rtrace's default 0.15) is not
+    # specular-sampled; its sky and ground reflect as Lambertian (tests/test_reflectance.py
+    # measures it). The occluder set's first run rendered three such plastics and read
+    # them matt (studies/README.md, "Occluder albedo"). Rendering must say so.
+    rough_dim = _small(name="dim", specularity=0.068, roughness=0.055)
+    assert rough_dim.specular_threshold() == 0.15
+    assert rough_dim.lambertian_indirect_gloss()
+    assert rough_dim.bundle_truth()["lambertian_indirect_gloss"] is True
+    traced = dataclasses.replace(rough_dim, ambient=sequences.TRACED_SPECULAR_AMBIENT)
+    assert traced.specular_threshold() == 0.0 and not traced.lambertian_indirect_gloss()
+    # above the threshold, or smooth (SP_PURE: the mirror ray is traced), or matt: traced
+    assert not _small(specularity=0.2, roughness=0.055).lambertian_indirect_gloss()
+    assert not _small(specularity=0.068, roughness=0.0).lambertian_indirect_gloss()
+    assert not _small(specularity=0.0, roughness=0.05).lambertian_indirect_gloss()
+    # the threshold is read from the options, the last -st winning (rtrace's order)
+    high = dataclasses.replace(
+        rough_dim, specularity=0.3, ambient=(*sequences.DEFAULT_AMBIENT, "-st", "0.5")
+    )
+    assert high.specular_threshold() == 0.5 and high.lambertian_indirect_gloss()
+    with pytest.warns(
+        sequences.RenderWarning, match=r"1 sequence\(s\).*dim \(specularity 0.068, -st 0.15\)"
+    ):
+        sequences.warn_lambertian_indirect_gloss([rough_dim, traced])
+
+    # render_bundles warns before it renders (stopped here before Radiance runs)
+    def stop(*args, **kwargs):
+        raise RuntimeError("stopped before rendering")
+
+    monkeypatch.setattr(sequences, "camera_rays", stop)
+    with pytest.warns(sequences.RenderWarning), pytest.raises(RuntimeError, match="stopped"):
+        sequences.render_bundles([rough_dim], tmp_path, progress=False)
+
+
 @pytest.mark.radiance
 def test_broken_cloud_auto_exposure_srgb(validation_pair):
     from bayesgloss import bundle, render, sky
