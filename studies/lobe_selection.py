@@ -147,6 +147,13 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     tasks = [(f, i) for i in range(args.n) for f in LOBE_FAMILIES]
     rows = []
+    design = {k: getattr(args, k) for k in ("n", "seed", "noise", "max_sweeps")}
+
+    def write():  # after every object: a run cut short keeps what it finished
+        out = {"design": design, "summary": summarise(rows), "objects": rows}
+        Path(args.out).write_text(json.dumps(out, indent=1))
+        return out
+
     with process_pool(args.jobs) as pool:
         futures = [
             pool.submit(replicate, f, i, args.seed, args.noise, args.max_sweeps) for f, i in tasks
@@ -155,12 +162,7 @@ def main(argv=None) -> dict:
             rows.append(fut.result())
             r = rows[-1]
             print(r["family"], r["index"], r["chosen"], f"{r['seconds']:.0f} s", flush=True)
-    out = {
-        "design": {k: getattr(args, k) for k in ("n", "seed", "noise", "max_sweeps")},
-        "summary": summarise(rows),
-        "objects": rows,
-    }
-    Path(args.out).write_text(json.dumps(out, indent=1))
+            out = write()
     print(json.dumps(out["summary"], indent=1))
     return out
 

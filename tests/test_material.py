@@ -86,7 +86,8 @@ def test_one_material_reads_gloss_albedo_spread_and_clouded_frames(paper_three_s
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("fresnel", "lobe"), [("none", "phong"), ("radiance", "phong"), ("none", "ggx")]
+    ("fresnel", "lobe"),
+    [("none", "phong"), ("radiance", "phong"), ("none", "ggx"), ("none", "ward")],
 )
 def test_one_material_sbc(paper_three_skies, fresnel, lobe):
     # Simulation-based calibration of the default object model (Talts et al.
@@ -100,8 +101,9 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe):
     # binomial range at 0.9; an interval 30 % too narrow holds it in about
     # 45 of 60 (stop 24's unmixed walkers held it in 79 of 100). With the
     # Fresnel raise (bayesgloss.fresnel) its strength k is drawn from its
-    # prior with the rest, and its ranks are tested too. With the GGX lobe
-    # (bayesgloss.lobes) the tables are that family's, the sampler the same.
+    # prior with the rest, and its ranks are tested too. With the GGX or the
+    # Ward lobe (bayesgloss.lobes) the tables are that family's, the sampler
+    # the same.
     import importlib.util
     from pathlib import Path
 
