@@ -93,6 +93,20 @@ def material_class(truth: dict) -> str | None:
     return f"{smooth}-{truth['material']}"
 
 
+def lambertian_indirect_gloss(truth: dict) -> bool:
+    """Whether Radiance rendered the bundle's material with Lambertian indirect
+    gloss (:meth:`bayesgloss.sequences.SequenceConfig.lambertian_indirect_gloss`:
+    rough, and no more specular than rtrace's ``-st``): its truth's flag, or
+    for bundles written before the flag, from its config."""
+    if "lambertian_indirect_gloss" in truth:
+        return bool(truth["lambertian_indirect_gloss"])
+    if truth.get("renderer") != "radiance" or "config" not in truth:
+        return False
+    from bayesgloss.sequences import SequenceConfig
+
+    return SequenceConfig.from_dict(truth["config"]).lambertian_indirect_gloss()
+
+
 def calibration_figure(scores: list[dict], path: Path, methods) -> dict | None:
     """Nominal against observed coverage of the central intervals of the
     object's gamma, per material class, from each score's ``pit`` (the
@@ -177,6 +191,7 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
         "truth": truth.get("gloss"),
         "direct_sun": direct_sun(truth),
         "class": material_class(truth),
+        "lambertian_indirect_gloss": lambertian_indirect_gloss(truth),
         "encoding": b.pixel_encoding,
         "facets": len(b.facets.ids),
     }
