@@ -51,6 +51,7 @@ SETS = {
     "validation_set": "validation_radiance",
     "validation_holdout": "validation_holdout",
     "validation_holdout2": "validation_holdout2",
+    "validation_holdout3": "validation_holdout3",
     "mitsuba_set": "validation_mitsuba",
 }
 RESULTS = HERE / "results"
