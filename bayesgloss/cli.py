@@ -249,6 +249,7 @@ def _estimate(args: argparse.Namespace) -> int:
         fresnel=args.fresnel,
         lobe=args.lobe,
         occluder_albedo=args.occluder_albedo,
+        ground_facing=args.ground_facing,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -351,6 +352,7 @@ def _estimate_many(args, progress) -> int:
                 **({"fresnel": args.fresnel} if args.fresnel else {}),
                 **({"lobe": args.lobe} if args.lobe else {}),
                 **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
+                **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
                 "bundle_content": content,
             },
         )
@@ -512,6 +514,7 @@ def _transform(text: str):
 def _parser() -> argparse.ArgumentParser:
     from . import sky
     from .fresnel import FRESNEL_MODELS
+    from .ground_facing import DEFAULT_GROUND_FACING, GROUND_FACING_MODES, GROUND_FACING_NZ
     from .joint_estimate import DEFAULT_FRESNEL
     from .lobes import LOBE_FAMILIES
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
@@ -632,6 +635,15 @@ def _parser() -> argparse.ArgumentParser:
         f"{OCCLUDER_REFLECTANCE:g}, or 'stacked': one fit per albedo of "
         f"{', '.join(f'{a:g}' for a in OCCLUDER_ALBEDOS)}, stacked by PSIS-LOO "
         "(bayesgloss.occluder_albedo)",
+    )
+    es.add_argument(
+        "--ground-facing",
+        default=None,
+        choices=GROUND_FACING_MODES,
+        help=f"facets facing the ground (normal z below {GROUND_FACING_NZ:g}) in a bundle "
+        f"without an object_mesh (default {DEFAULT_GROUND_FACING!r}): 'leave-out' (flagged "
+        "faces-ground: the object's shadow on the ground they see is not known) or 'keep' "
+        "(bayesgloss.ground_facing)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

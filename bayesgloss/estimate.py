@@ -92,6 +92,11 @@ from . import diagnostics, lobe_families, sky_families
 from . import likelihood as lk
 from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_inference_data
 from .fresnel import check_fresnel_model
+from .ground_facing import (
+    DEFAULT_GROUND_FACING,
+    check_ground_facing_mode,
+    facets_facing_ground,
+)
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
@@ -261,6 +266,7 @@ def estimate_bundle(
     fresnel: str | None = None,
     lobe: str | None = None,
     occluder_albedo: str | None = None,
+    ground_facing: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -313,6 +319,11 @@ def estimate_bundle(
         :data:`bayesgloss.occluder_albedo.DEFAULT_OCCLUDER_ALBEDO`, and
         ``"fixed"`` with ``lobe="families"`` (one stack at a time; asking for
         both is an error). Without a mesh it changes nothing.
+    ground_facing : {"leave-out", "keep"}, optional
+        Facets facing the ground in a bundle without an ``object_mesh``
+        (:mod:`bayesgloss.ground_facing`): left out, flagged
+        ``faces-ground`` (unless no other facet is usable), or kept; default
+        :data:`bayesgloss.ground_facing.DEFAULT_GROUND_FACING`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -332,6 +343,13 @@ def estimate_bundle(
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES, censored)
+    # facets facing the ground, whose ground a bundle without a mesh does not describe
+    facing = np.zeros_like(keep)
+    if check_ground_facing_mode(ground_facing or DEFAULT_GROUND_FACING) == "leave-out":
+        facing = keep & facets_facing_ground(b.facets.normal, bool(b.manifest.get("object_mesh")))
+        if not (keep & ~facing).any():  # nothing else to fit: keep them
+            facing[:] = False
+        keep = keep & ~facing
     joint = _joint_possible(per_frame, noise, camera)
     if illumination is None:
         illumination = default_illumination(b, per_frame=per_frame, noise=noise, camera=camera)
@@ -435,7 +453,9 @@ def estimate_bundle(
             if not per_frame
             else "facets (per-frame illumination needs relative noise and a known pixel response)",
         }
-    out = _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run)
+    out = _summarise(
+        b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing
+    )
     if families is not None:
         out.summary["sky_families"] = families
     if part is not None:  # each choice's weight, LOO and own gloss
@@ -449,8 +469,11 @@ def _width(q: dict) -> float:
     return hi - lo
 
 
-def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run):
-    """The summary of an estimate and its result."""
+def _summarise(
+    b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing=None
+):
+    """The summary of an estimate and its result; ``facing``: the facets left
+    out as facing the ground (:mod:`bayesgloss.ground_facing`)."""
     ids = curves.ids[keep]
     diag = convergence(idata, getattr(samples, "facets", None))
     data_priors = lk.Priors()
@@ -488,13 +511,11 @@ def _summarise(b, curves, keep, idata, samples, illumination, noise, camera, see
         )
     for k in np.flatnonzero(~keep):
         short = usable[k].sum() < MIN_FRAMES  # else too few measured: saturated
+        reason = "too-few-frames" if short else "saturated"
+        if facing is not None and facing[k]:
+            reason = "faces-ground"
         facets.append(
-            {
-                "id": int(curves.ids[k]),
-                "gamma": None,
-                "converged": False,
-                "flags": ["too-few-frames" if short else "saturated"],
-            }
+            {"id": int(curves.ids[k]), "gamma": None, "converged": False, "flags": [reason]}
         )
     conv = diag["converged"]
     use = conv if conv.sum() >= 2 else np.ones(len(conv), dtype=bool)
@@ -587,6 +608,7 @@ def estimate_unit(
     fresnel: str | None = None,
     lobe: str | None = None,
     occluder_albedo: str | None = None,
+    ground_facing: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -596,8 +618,8 @@ def estimate_unit(
     bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
-    changed since is an error. ``fresnel``, ``lobe`` and ``occluder_albedo``:
-    as :func:`estimate_bundle`'s
+    changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo`` and
+    ``ground_facing``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -619,5 +641,6 @@ def estimate_unit(
         fresnel=fresnel,
         lobe=lobe,
         occluder_albedo=occluder_albedo,
+        ground_facing=ground_facing,
     )
     return result_files(res)
