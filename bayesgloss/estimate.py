@@ -92,11 +92,7 @@ from . import diagnostics, lobe_families, sky_families
 from . import likelihood as lk
 from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_inference_data
 from .fresnel import check_fresnel_model
-from .ground_facing import (
-    DEFAULT_GROUND_FACING,
-    check_ground_facing_mode,
-    facets_facing_ground,
-)
+from .ground_facing import DEFAULT_GROUND_FACING, leave_out_ground_facing
 from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
@@ -343,13 +339,7 @@ def estimate_bundle(
     camera = _camera(b, camera)
     y, usable, censored = observations(curves)
     keep = bundle_io.usable_facets(b, usable, MIN_FRAMES, censored)
-    # facets facing the ground, whose ground a bundle without a mesh does not describe
-    facing = np.zeros_like(keep)
-    if check_ground_facing_mode(ground_facing or DEFAULT_GROUND_FACING) == "leave-out":
-        facing = keep & facets_facing_ground(b.facets.normal, bool(b.manifest.get("object_mesh")))
-        if not (keep & ~facing).any():  # nothing else to fit: keep them
-            facing[:] = False
-        keep = keep & ~facing
+    keep, facing = leave_out_ground_facing(b, keep, ground_facing or DEFAULT_GROUND_FACING)
     joint = _joint_possible(per_frame, noise, camera)
     if illumination is None:
         illumination = default_illumination(b, per_frame=per_frame, noise=noise, camera=camera)

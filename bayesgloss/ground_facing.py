@@ -36,6 +36,7 @@ __all__ = [
     "DEFAULT_GROUND_FACING",
     "check_ground_facing_mode",
     "facets_facing_ground",
+    "leave_out_ground_facing",
 ]
 
 #: A facet faces the ground where its unit normal's z (up) is below this [-]:
@@ -76,3 +77,32 @@ def facets_facing_ground(normals, has_mesh: bool) -> np.ndarray:
     if has_mesh:
         return np.zeros(nz.shape, dtype=bool)
     return nz < GROUND_FACING_NZ
+
+
+def leave_out_ground_facing(bundle, keep, mode: str = DEFAULT_GROUND_FACING):
+    """The usable facets ``keep`` without those facing the ground (``mode``
+    ``"leave-out"``), unless no other usable facet is left.
+
+    Parameters
+    ----------
+    bundle : bayesgloss.bundle.Bundle
+    keep : ndarray (F,) of bool
+        Usable facets (:func:`bayesgloss.bundle.usable_facets`). -
+    mode : {"leave-out", "keep"}
+        :data:`GROUND_FACING_MODES`. -
+
+    Returns
+    -------
+    keep : ndarray (F,) of bool
+        The facets to fit.
+    left_out : ndarray (F,) of bool
+        The usable facets left out as facing the ground.
+    """
+    keep = np.asarray(keep, dtype=bool)
+    left_out = np.zeros_like(keep)
+    if check_ground_facing_mode(mode) == "leave-out":
+        has_mesh = bool(bundle.manifest.get("object_mesh"))
+        left_out = keep & facets_facing_ground(bundle.facets.normal, has_mesh)
+        if not (keep & ~left_out).any():  # nothing else to fit: keep them
+            left_out[:] = False
+    return keep & ~left_out, left_out
