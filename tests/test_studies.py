@@ -169,3 +169,24 @@ def test_mismatch(tmp_path):
     assert 0 <= lo <= row["post_median"] <= hi <= 1
     # plastic 0.5 of roughness 0.05: the Phong fit lands near the material's gloss
     assert abs(row["post_error"]) < 0.1
+
+
+def test_validation_calibration_randomises_the_pit_on_an_atom(tmp_path):
+    # reported draws are clipped to [0, 1]: a truth of exactly 0 (a matt metal) sits
+    # on an atom, where P(draw < truth) = 0 and no central interval ever holds it,
+    # although the highest-density interval reaching 0 does. Randomised within the
+    # atom (pit_le = P(draw <= truth) = 0.6 here) the PIT is U(0, 0.6): a central
+    # 90 % interval holds it with probability 0.55 / 0.6 = 0.917; 400 scores put
+    # the observed share within 0.05 of it (binomial sd 0.014)
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    validate = importlib.import_module("validate_radiance")
+    scores = [
+        {"direct_sun": True, "class": "rough-metal", "m": {"pit": 0.0, "pit_le": 0.6}}
+        for _ in range(400)
+    ]
+    out = validate.calibration_figure(scores, tmp_path / "c.png", ["m"])
+    assert abs(out["m"]["rough-metal"]["observed"][-1] - 0.55 / 0.6) < 0.05
+    older = [{"direct_sun": True, "class": "rough-metal", "m": {"pit": 0.0}} for _ in range(5)]
+    out = validate.calibration_figure(older, tmp_path / "c.png", ["m"])
+    assert out["m"]["rough-metal"]["observed"][-1] == 0.0  # scores without pit_le as before
