@@ -207,3 +207,24 @@ def paper_three_skies_bases(**kwargs):
 def paper_three_skies():
     """:func:`paper_three_skies_bases`' bases and sun-up frames."""
     return paper_three_skies_bases()[:2]
+
+
+def planned_unit_options(monkeypatch, paths, out, *extra) -> list[dict]:
+    """The options of each unit that ``bayesgloss estimate`` over several
+    bundles ``paths`` (with the CLI arguments ``extra``) plans, caught before
+    any unit runs (``runner.run_units`` replaced)."""
+    from bayesgloss import cli, runner
+
+    class Planned(Exception):
+        pass
+
+    seen = []
+
+    def plan(func, units, out, **kwargs):
+        seen.extend(options for _, options in units)
+        raise Planned
+
+    monkeypatch.setattr(runner, "run_units", plan)
+    with pytest.raises(Planned):
+        cli.main(["estimate", *map(str, paths), "--out", str(out), "--quiet", *extra])
+    return seen

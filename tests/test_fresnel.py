@@ -267,25 +267,13 @@ def test_several_bundles_carry_the_fresnel_model_into_their_units(tmp_path, monk
     # reach every unit's options (a unit without it would run the default
     # model silently), and be absent where not given (the units' keys of
     # earlier runs unchanged)
-    from conftest import make_synthetic_bundle
-
-    from bayesgloss import cli, runner
+    from conftest import make_synthetic_bundle, planned_unit_options
 
     paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    seen = []
-
-    class Planned(Exception):
-        pass
-
-    def plan(func, units, out, **kwargs):
-        seen.append([options for _, options in units])
-        raise Planned
-
-    monkeypatch.setattr(runner, "run_units", plan)
-    for extra in (["--fresnel", "radiance"], []):
-        args = ["estimate", *map(str, paths), "--out", str(tmp_path / "out"), "--quiet", *extra]
-        with pytest.raises(Planned):
-            cli.main(args)
+    seen = [
+        planned_unit_options(monkeypatch, paths, tmp_path / "out", *extra)
+        for extra in (["--fresnel", "radiance"], [])
+    ]
     with_fresnel, without = seen
     assert [u["fresnel"] for u in with_fresnel] == ["radiance", "radiance"]
     assert all("fresnel" not in u for u in without)
