@@ -76,3 +76,30 @@ def test_cli_takes_ground_facing(tmp_path, capsys):
     assert cli.main([*args, "--ground-facing", "keep"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert [f["gamma"] is not None for f in out["facets"] if f["id"] == ids[0]] == [True]
+
+
+def test_several_bundles_carry_ground_facing_into_their_units(tmp_path, monkeypatch):
+    # over several bundles each is a unit of work: --ground-facing must reach each
+    # unit's options (absent where not given: earlier runs keep their keys) and,
+    # through estimate_unit, estimate_bundle
+    from conftest import make_synthetic_bundle, planned_unit_options
+
+    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
+    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--ground-facing", "keep")
+    assert [u["ground_facing"] for u in units] == ["keep", "keep"]
+    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
+    assert all("ground_facing" not in u for u in plain)
+
+    class Stop(Exception):
+        pass
+
+    seen = {}
+
+    def fake_estimate(b, **kwargs):
+        seen.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(estimate, "estimate_bundle", fake_estimate)
+    with pytest.raises(Stop):
+        estimate.estimate_unit(**units[0])
+    assert seen["ground_facing"] == "keep"
