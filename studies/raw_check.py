@@ -10,8 +10,9 @@ each file it measures
    level kept) and decoded with :func:`bayesgloss.images.decode_raw_linear`,
    the options ``bundle make`` uses. A linear decode at a fixed scale gives
    pixel ratios k on every unsaturated pixel; the same with LibRaw's default
-   ``adjust_maximum_thr`` (0.75) and its default sRGB transfer curve are
-   measured beside it, to show the check tells them apart.
+   ``adjust_maximum_thr`` (0.75), and with all of LibRaw's defaults (its
+   BT.709 transfer curve too), are measured beside it, to show the check
+   tells them apart.
 2. **Linearity against the sensor.** Mean photosite values per colour over
    smooth 32 x 32 blocks against the decoded block means: the relative rms
    residual of the best 3 x 3 linear map (demosaicking and the colour matrix
@@ -90,9 +91,8 @@ def sensor_fit(path: Path) -> dict:
             a[: h * BLOCK, : w * BLOCK].reshape(h, BLOCK, w, BLOCK, *a.shape[2:]).mean(axis=(1, 3))
         )
 
-    cfa_names = {0: (0,), 1: (1, 3), 2: (2,)}  # R, both greens, B as LibRaw numbers them
     sensor = []
-    for group in cfa_names.values():
+    for group in ((0,), (1, 3), (2,)):  # R, both greens, B as LibRaw numbers them
         mask = np.isin(colours, group)
         sensor.append(blocks(np.where(mask, values, 0.0)) / blocks(mask.astype(float)))
     x = np.stack(sensor, axis=-1).reshape(-1, 3)
