@@ -729,6 +729,12 @@ class Bundle:
         return 0.2 if self.ground_reflectance is None else float(self.ground_reflectance)
 
     @property
+    def has_mesh(self) -> bool:
+        """Whether the bundle gives an ``object_mesh`` (its shadows and
+        occlusion then enter the forward model, :mod:`bayesgloss.visibility`)."""
+        return bool(self.manifest.get("object_mesh"))
+
+    @property
     def exposure_known(self) -> bool:
         """Whether frames share a known exposure: ``frames[].exposure`` given,
         or radiance itself (``linear-radiance``). Otherwise the spec lets the

@@ -363,7 +363,7 @@ def estimate_bundle(
     if occluder_albedo is None:  # the lobe families' stack keeps the faces at one albedo
         occluder_albedo = "fixed" if lobe == "families" else DEFAULT_OCCLUDER_ALBEDO
     occluder = check_occluder_albedo_mode(occluder_albedo)
-    stack_occluder = occluder == "stacked" and joint and bool(b.manifest.get("object_mesh"))
+    stack_occluder = occluder == "stacked" and joint and b.has_mesh
     if stack_occluder and lobe == "families":
         raise ValueError(
             "occluder albedo 'stacked' and lobe 'families' each fit and stack several "
@@ -570,7 +570,7 @@ def _summarise(
         summary["lobe_family"] = post.attrs.get(
             "lobe_family_most_weight", post.attrs.get("lobe_family", "phong")
         )
-        if b.manifest.get("object_mesh"):  # its faces' albedo: the most-weighted, or fixed
+        if b.has_mesh:  # its faces' albedo: the most-weighted, or fixed
             summary["occluder_albedo"] = float(
                 post.attrs.get(
                     "occluder_albedo_most_weight",

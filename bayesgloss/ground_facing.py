@@ -101,8 +101,7 @@ def leave_out_ground_facing(bundle, keep, mode: str = DEFAULT_GROUND_FACING):
     keep = np.asarray(keep, dtype=bool)
     left_out = np.zeros_like(keep)
     if check_ground_facing_mode(mode) == "leave-out":
-        has_mesh = bool(bundle.manifest.get("object_mesh"))
-        left_out = keep & facets_facing_ground(bundle.facets.normal, has_mesh)
+        left_out = keep & facets_facing_ground(bundle.facets.normal, bundle.has_mesh)
         if not (keep & ~left_out).any():  # nothing else to fit: keep them
             left_out[:] = False
     return keep & ~left_out, left_out

@@ -1012,7 +1012,7 @@ def shadow_flags(bundle, curves, visibility: Visibility | None = None):
         :func:`bundle_visibility` of it, when already computed.
     """
     if visibility is None:
-        if not bundle.manifest.get("object_mesh"):
+        if not bundle.has_mesh:
             return curves
         visibility = bundle_visibility(bundle)
     reasons = bundle_io.FLAG_REASONS

@@ -116,7 +116,7 @@ def _faces_ground(b) -> bool:
     """Whether the default leaves any facet of bundle ``b`` out as facing the ground."""
     from bayesgloss.ground_facing import facets_facing_ground
 
-    return bool(facets_facing_ground(b.facets.normal, bool(b.manifest.get("object_mesh"))).any())
+    return bool(facets_facing_ground(b.facets.normal, b.has_mesh).any())
 
 
 def calibration_figure(scores: list[dict], path: Path, methods) -> dict | None:
