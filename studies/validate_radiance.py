@@ -28,7 +28,8 @@ Each bundle's scores are cached in ``studies/out/<set>/scores``
 
 Usage: python studies/validate_radiance.py [--jobs 2] [--max-sweeps 2000]
 [--redo per-frame ...] (score those methods afresh, keeping the others' cached scores)
-[--set validation_set|validation_holdout]
+[--set validation_set|validation_holdout|...] [--summary-only] (rebuild the
+tables and figures from the committed scores, fitting nothing)
 """
 
 from __future__ import annotations
@@ -333,7 +334,7 @@ def table(scores: list[dict]) -> dict:
         rows = [s for s in scores if cat in ("all", s["category"]) and s["truth"] is not None]
         sun = [s for s in rows if s["direct_sun"]]
         entry = {"sequences": len(rows), "direct_sun": len(sun)}
-        for m in METHODS:
+        for m in (m for m in METHODS if any(m in s for s in scores)):  # the methods run
             err = [abs(s[m]["median"] - s["truth"]) for s in sun if m in s]
             e = {"mae_direct_sun": float(np.mean(err)) if err else None}
             if m != "baseline":
@@ -420,33 +421,81 @@ def figure(
     fig.savefig(path, dpi=120)
 
 
-#: gensky's three CIE skies and the name of the ``auto`` mixture's sky model for each.
+#: gensky's three CIE skies and the name of the estimator's sky family for each.
 GENSKY_FAMILIES = {
     "gensky-clear": "gensky-clear",
     "gensky-intermediate": "gensky-intermediate",
     "gensky-overcast": "gensky-overcast",
 }
 
+#: The method whose answers the family table and the broken-cloud figure
+#: describe: ``estimate``'s default, then the older per-frame mixture (sets
+#: scored before the default had sky families: the first holdout, the
+#: validation set).
+NAMING_METHODS = ("families", "per-frame")
+
+
+def _naming_entry(score: dict) -> tuple[str, dict] | tuple[None, None]:
+    """The first of :data:`NAMING_METHODS` that ``score`` holds, and its entry."""
+    for method in NAMING_METHODS:
+        if method in score:
+            return method, score[method]
+    return None, None
+
+
+def named_family(entry: dict) -> str | None:
+    """The sky family an estimate named.
+
+    With stacked sky families (``sky_families``), the most-weighted family;
+    where that is the per-frame mixture ``auto``, the mixture's most-weighted
+    sky model (``sky_models``), so that a day the mixture fits best is still
+    named by the shape it found. Without stacking (the per-frame mixture
+    alone), the mixture's most-weighted model. None where the entry holds
+    neither (a fixed-brightness fit).
+    """
+    stack = entry.get("sky_families")
+    models = entry.get("sky_models") or {}
+    if stack:
+        best = stack["most_weight"]
+        return models.get("most_weight", best) if best == "auto" else best
+    return models.get("most_weight")
+
 
 def family_table(scores: list[dict]) -> dict:
-    """Which sky model of the per-frame ``auto`` mixture has the most mean
-    weight, per rendering sky: named right for gensky's skies (the issue's
-    goal: at least 90 %), and what wins for the others."""
+    """Which sky family the default estimate names, per rendering sky
+    (:func:`named_family`): named right for gensky's skies (the issue's
+    goal: at least 90 %), and what wins for the others, with the stack's
+    weight of the winner (median over the category's sequences)."""
     out = {}
     for s in scores:
-        pf = s.get("per-frame", {})
-        models = pf.get("sky_models")
-        if not models:
+        method, entry = _naming_entry(s)
+        win = None if entry is None else named_family(entry)
+        if win is None:
             continue
-        row = out.setdefault(s["category"], {"sequences": 0, "most_weight": {}, "right": 0})
+        row = out.setdefault(
+            s["category"], {"sequences": 0, "method": method, "most_weight": {}, "right": 0}
+        )
         row["sequences"] += 1
-        win = models["most_weight"]
         row["most_weight"][win] = row["most_weight"].get(win, 0) + 1
         row["right"] += GENSKY_FAMILIES.get(s["sky"]) == win
-    gensky = [r for c, r in out.items() if c in GENSKY_FAMILIES]
+        stack = entry.get("sky_families")
+        if stack:
+            row.setdefault("_weights", []).append(stack["families"][stack["most_weight"]]["weight"])
+    for row in out.values():
+        weights = row.pop("_weights", None)
+        if weights:
+            row["median_weight"] = float(np.median(weights))
+    # every sequence rendered under one of gensky's skies, whatever its category
+    # (an auto-exposure day's sky is one of them too)
+    named = [
+        (GENSKY_FAMILIES[s["sky"]], named_family(_naming_entry(s)[1] or {}))
+        for s in scores
+        if s.get("sky") in GENSKY_FAMILIES
+    ]
+    named = [(sky, win) for sky, win in named if win is not None]
     out["gensky_named_right"] = {
-        "right": sum(r["right"] for r in gensky),
-        "sequences": sum(r["sequences"] for r in gensky),
+        "right": sum(sky == win for sky, win in named),
+        "sequences": len(named),
     }
     return out
 
@@ -464,10 +513,14 @@ def sun_figure(scores: list[dict], bundles: Path, path: Path) -> dict:
     fig, ax = plt.subplots(figsize=(5.2, 4.8))
     points = {}
     for s in scores:
-        pf = s.get("per-frame", {})
+        pf = _naming_entry(s)[1] or {}
         if s["category"] != "broken-cloud" or "frame" not in pf:
             continue
-        truth = json.loads((bundles / s["bundle"] / "sequence.json").read_text())["truth"]
+        manifest = bundles / s["bundle"] / "sequence.json"
+        if not manifest.exists():  # the set not rendered here: no DNI to plot against
+            print(f"broken-cloud figure: {manifest} not found, {s['bundle']} left out")
+            continue
+        truth = json.loads(manifest.read_text())["truth"]
         dni = np.asarray(truth["dni"], float)[pf["frame"]]
         sun, lo, hi = (np.asarray(pf[k], float) for k in ("sun", "sun_q05", "sun_q95"))
         clear = dni > 0.5 * dni.max()
@@ -496,6 +549,31 @@ def sun_figure(scores: list[dict], bundles: Path, path: Path) -> dict:
     return points
 
 
+def write_summary(scores: list[dict], set_name: str, max_sweeps: int) -> dict:
+    """The tables and figures of a set's scores, written to ``studies/results/``."""
+    bundles = HERE / "out" / set_name / "bundles"
+    name = SETS[set_name]
+    RESULTS.mkdir(exist_ok=True)
+    summary = {
+        "max_sweeps": max_sweeps,
+        "table": table(scores),
+        "sky_families": family_table(scores),
+        "classes": class_table(scores),
+        "sequences": scores,
+    }
+    summary["broken_cloud_sun"] = sun_figure(
+        scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
+    )
+    run = [m for m in METHODS if any(m in s for s in scores)]
+    title = "Mitsuba validation set" if set_name == "mitsuba_set" else "Radiance validation set"
+    figure(scores, RESULTS / f"{name}.png", run, title)
+    calibration = calibration_figure(scores, RESULTS / f"{name}_calibration.png", run)
+    if calibration is not None:
+        summary["calibration"] = calibration
+    (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
@@ -505,49 +583,43 @@ def main(argv=None) -> None:
         "--redo", nargs="*", default=[], choices=METHODS, help="methods to score afresh"
     )
     ap.add_argument("--methods", nargs="*", default=None, choices=METHODS, help="methods to score")
+    ap.add_argument(
+        "--summary-only",
+        action="store_true",
+        help="fit nothing: rebuild the tables and figures from the set's committed scores "
+        "(the broken-cloud figure needs the set's bundles)",
+    )
     args = ap.parse_args(argv)
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
     bundles = HERE / "out" / args.set / "bundles"
-    name = SETS[args.set]
-    paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
-    results = RESULTS / f"{name}.json"
+    results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
     if results.exists():
-        committed = {s["bundle"]: s for s in json.loads(results.read_text())["sequences"]}
-    with ProcessPoolExecutor(args.jobs) as pool:
-        n = len(paths)
-        scores = list(
-            pool.map(
-                _cached,
-                paths,
-                [args.max_sweeps] * n,
-                [args.redo] * n,
-                [None] * n,
-                [committed] * n,
-                [methods] * n,
+        saved = json.loads(results.read_text())
+        committed = {s["bundle"]: s for s in saved["sequences"]}
+    if args.summary_only:
+        if not committed:
+            raise SystemExit(f"validate_radiance: no scores in {results} to summarise")
+        summary = write_summary(list(committed.values()), args.set, saved["max_sweeps"])
+    else:
+        paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
+        with ProcessPoolExecutor(args.jobs) as pool:
+            n = len(paths)
+            scores = list(
+                pool.map(
+                    _cached,
+                    paths,
+                    [args.max_sweeps] * n,
+                    [args.redo] * n,
+                    [None] * n,
+                    [committed] * n,
+                    [methods] * n,
+                )
             )
-        )
-    RESULTS.mkdir(exist_ok=True)
-    summary = {
-        "max_sweeps": args.max_sweeps,
-        "table": table(scores),
-        "sky_families": family_table(scores),
-        "classes": class_table(scores),
-        "sequences": scores,
-    }
-    summary["broken_cloud_sun"] = sun_figure(
-        scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
-    )
-    (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
-    run = [m for m in METHODS if any(m in s for s in scores)]
-    title = "Mitsuba validation set" if args.set == "mitsuba_set" else "Radiance validation set"
-    figure(scores, RESULTS / f"{name}.png", run, title)
-    calibration = calibration_figure(scores, RESULTS / f"{name}_calibration.png", run)
-    if calibration is not None:
-        summary["calibration"] = calibration
-        (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=1))
+        summary = write_summary(scores, args.set, args.max_sweeps)
     for cat, row in summary["table"].items():
         print(cat, json.dumps(row))
+    print("sky families:", json.dumps(summary["sky_families"]))
 
 
 if __name__ == "__main__":

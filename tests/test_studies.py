@@ -190,3 +190,54 @@ def test_validation_calibration_randomises_the_pit_on_an_atom(tmp_path):
     older = [{"direct_sun": True, "class": "rough-metal", "m": {"pit": 0.0}} for _ in range(5)]
     out = validate.calibration_figure(older, tmp_path / "c.png", ["m"])
     assert out["m"]["rough-metal"]["observed"][-1] == 0.0  # scores without pit_le as before
+
+
+def test_validation_family_table_reads_the_default_method():
+    # sets scored with the default (stacked sky families) alone have no
+    # "per-frame" entry: the table read only that one and counted 0 of 0
+    # gensky days on holdouts 2 and 3. Where the stack's winner is the
+    # per-frame mixture "auto", the day is named by the mixture's own
+    # most-weighted sky model; an auto-exposure day rendered under one of
+    # gensky's skies counts toward the gensky goal like any other
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    validate = importlib.import_module("validate_radiance")
+
+    def score(category, sky, most, weights, mixture=None):
+        stack = {"most_weight": most, "families": {k: {"weight": w} for k, w in weights.items()}}
+        entry = {"sky_families": stack, "sky_models": mixture}
+        return {"category": category, "sky": sky, "families": entry}
+
+    scores = [
+        score("gensky-clear", "gensky-clear", "gensky-clear", {"gensky-clear": 0.9, "auto": 0.1}),
+        score(
+            "gensky-clear",
+            "gensky-clear",
+            "auto",
+            {"auto": 0.97, "gensky-clear": 0.03},
+            {"most_weight": "gensky-clear"},
+        ),
+        score("gensky-clear", "gensky-clear", "gensky-intermediate", {"gensky-intermediate": 1}),
+        score("auto-exposure", "gensky-overcast", "gensky-overcast", {"gensky-overcast": 1}),
+        score("perez-clear", "perez", "gensky-clear", {"gensky-clear": 0.7, "auto": 0.3}),
+        {"category": "gensky-clear", "sky": "gensky-clear", "fixed": {"median": 0.5}},
+    ]
+    out = validate.family_table(scores)
+    assert out["gensky_named_right"] == {"right": 3, "sequences": 4}
+    assert out["gensky-clear"]["most_weight"] == {"gensky-clear": 2, "gensky-intermediate": 1}
+    assert out["perez-clear"] == {
+        "sequences": 1,
+        "method": "families",
+        "most_weight": {"gensky-clear": 1},
+        "right": 0,
+        "median_weight": 0.7,
+    }
+    # a set scored with the per-frame mixture alone (the first holdout's runs)
+    older = [
+        {
+            "category": "gensky-clear",
+            "sky": "gensky-clear",
+            "per-frame": {"sky_models": {"most_weight": "gensky-clear"}},
+        }
+    ]
+    assert validate.family_table(older)["gensky_named_right"] == {"right": 1, "sequences": 1}
