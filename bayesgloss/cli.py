@@ -250,6 +250,7 @@ def _estimate(args: argparse.Namespace) -> int:
         lobe=args.lobe,
         occluder_albedo=args.occluder_albedo,
         ground_facing=args.ground_facing,
+        overcast_variants=args.overcast_variants,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -353,6 +354,7 @@ def _estimate_many(args, progress) -> int:
                 **({"lobe": args.lobe} if args.lobe else {}),
                 **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
                 **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
+                **({"overcast_variants": True} if args.overcast_variants else {}),
                 "bundle_content": content,
             },
         )
@@ -519,6 +521,7 @@ def _parser() -> argparse.ArgumentParser:
     from .lobes import LOBE_FAMILIES
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
     from .render import OCCLUDER_REFLECTANCE
+    from .sky_families import OVERCAST_VARIANTS
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -644,6 +647,13 @@ def _parser() -> argparse.ArgumentParser:
         f"without an object_mesh (default {DEFAULT_GROUND_FACING!r}): 'leave-out' (flagged "
         "faces-ground: the object's shadow on the ground they see is not known) or 'keep' "
         "(bayesgloss.ground_facing)",
+    )
+    es.add_argument(
+        "--overcast-variants",
+        action="store_true",
+        help="with the sky families (the default sky): where gensky's overcast sky wins, "
+        f"also fit the overcast shapes {', '.join(OVERCAST_VARIANTS)} and stack them all "
+        "(bayesgloss.sky_families; opt-in until tested on unseen renders)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

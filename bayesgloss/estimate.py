@@ -263,6 +263,7 @@ def estimate_bundle(
     lobe: str | None = None,
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
+    overcast_variants: bool = False,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -320,6 +321,11 @@ def estimate_bundle(
         (:mod:`bayesgloss.ground_facing`): left out, flagged
         ``faces-ground`` (unless no other facet is usable), or kept; default
         :data:`bayesgloss.ground_facing.DEFAULT_GROUND_FACING`.
+    overcast_variants : bool
+        With ``illumination="families"``: where gensky's overcast sky wins
+        the stack, also fit the overcast shapes of
+        :data:`bayesgloss.sky_families.OVERCAST_VARIANTS` and stack them all
+        (opt-in until it is tested on unseen renders).
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -401,7 +407,17 @@ def estimate_bundle(
         }
     elif illumination == "families":
         idata, samples, used, families = sky_families.fit_families(
-            b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs
+            b,
+            curves,
+            y,
+            usable,
+            censored,
+            keep,
+            seed,
+            sampler_options,
+            progress,
+            jobs,
+            overcast_variants=overcast_variants,
         )
         run = {
             "seconds": families.pop("seconds"),
@@ -599,6 +615,7 @@ def estimate_unit(
     lobe: str | None = None,
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
+    overcast_variants: bool = False,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -608,8 +625,8 @@ def estimate_unit(
     bundle's :func:`~bayesgloss.bundle.bundle_digest` when the run was
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
-    changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo`` and
-    ``ground_facing``: as :func:`estimate_bundle`'s
+    changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
+    ``ground_facing`` and ``overcast_variants``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -632,5 +649,6 @@ def estimate_unit(
         lobe=lobe,
         occluder_albedo=occluder_albedo,
         ground_facing=ground_facing,
+        overcast_variants=overcast_variants,
     )
     return result_files(res)

@@ -55,6 +55,7 @@ from .pool import process_pool
 
 __all__ = [
     "FAMILIES",
+    "OVERCAST_VARIANTS",
     "loo_stacking_weights",
     "mixture_draws",
     "mix_posteriors",
@@ -65,6 +66,22 @@ __all__ = [
 #: mixture of gensky's, its weights inferred per frame) and gensky's clear,
 #: intermediate and overcast skies each all day.
 FAMILIES = ("auto", *AUTO_SKIES)
+
+#: Overcast shapes fitted as well where gensky's overcast sky wins the stack
+#: of :data:`FAMILIES` (``fit_families(..., overcast_variants=True)``,
+#: ``estimate --overcast-variants``): the CIE general sky of type 3
+#: (overcast, luminance gradation group II, uniform in azimuth) and gensky's
+#: uniform sky (CIE type 5, gradation group III: no gradation). With
+#: gensky's overcast sky (Moon & Spencer's, close to CIE type 1, group I)
+#: they span the CIE overcast skies' gradations from 3:1 zenith to horizon
+#: to none. On a sunless day the sky's uneven brightness over the facets is
+#: all that tells gloss, so a wrong gradation reads a wrong, narrow gamma:
+#: forward-model objects under CIE types 3 and 5 read 0.351 [0.151, 0.567]
+#: for 0.626 and 0.087 [0.007, 0.300] for 0.413 under gensky's overcast
+#: sky, 0.528 [0.229, 0.892] and 0.217 [0.028, 0.544] under their own
+#: (studies/README.md, stop 33). Fitted only where the overcast sky wins,
+#: the sun-lit days pay nothing.
+OVERCAST_VARIANTS = ("cie-3", "gensky-uniform")
 
 
 def _pointwise(idata) -> np.ndarray:
@@ -151,13 +168,53 @@ def mix_posteriors(idata, components: list, variables, weights, rng: np.random.G
         idata.posterior[var] = (idata.posterior[var].dims, mixed)
 
 
-def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=None, jobs=1):
+def _fit_each(names, args, seed, options, progress, jobs) -> dict:
+    """:func:`~bayesgloss.joint_estimate.joint_fit` of each sky family of
+    ``names`` (without the facets' own posteriors), on ``jobs`` processes."""
+    fits = {}
+    if jobs > 1:
+        with process_pool(min(jobs, len(names))) as pool:
+            futures = {
+                pool.submit(joint_fit, *args, name, seed, options, facets=False): name
+                for name in names
+            }
+            for done, future in enumerate(as_completed(futures), 1):
+                fits[futures[future]] = future.result()
+                if progress is not None:
+                    progress(done, len(names))
+    else:
+        for k, name in enumerate(names):
+            step = None
+            if progress is not None:
+
+                def step(done, total, k=k):
+                    progress(k * total + done, len(names) * total)
+
+            fits[name] = joint_fit(*args, name, seed, options, step, facets=False)
+    return {name: fits[name] for name in names}  # in the order of names
+
+
+def fit_families(
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    seed,
+    options,
+    progress=None,
+    jobs=1,
+    overcast_variants=False,
+):
     """:func:`~bayesgloss.joint_estimate.joint_fit` under each of :data:`FAMILIES`,
     stacked (module docstring).
 
     ``jobs`` > 1 fits that many families at once in worker processes
     (:func:`bayesgloss.pool.process_pool`; the fits are the same, each
     with ``seed``), ``progress`` then called with (fits done, fits).
+    ``overcast_variants``: where gensky's overcast sky has the most weight,
+    also fit :data:`OVERCAST_VARIANTS` and stack all the fits again.
 
     Returns
     -------
@@ -172,33 +229,18 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
     used : ndarray of bool
         The frames used.
     families : dict
-        Per family: :func:`loo_stacking_weights`'s entries and the quantiles
-        of its own ``gamma``; ``seconds`` of all fits.
+        Per family fitted: :func:`loo_stacking_weights`'s entries and the
+        quantiles of its own ``gamma``; ``seconds`` of all fits.
     """
     args = (b, curves, y, usable, censored, keep)
-    fits = {}
-    if jobs > 1:
-        with process_pool(min(jobs, len(FAMILIES))) as pool:
-            futures = {
-                pool.submit(joint_fit, *args, name, seed, options, facets=False): name
-                for name in FAMILIES
-            }
-            for done, future in enumerate(as_completed(futures), 1):
-                fits[futures[future]] = future.result()
-                if progress is not None:
-                    progress(done, len(FAMILIES))
-    else:
-        for k, name in enumerate(FAMILIES):
-            step = None
-            if progress is not None:
-
-                def step(done, total, k=k):
-                    progress(k * total + done, len(FAMILIES) * total)
-
-            fits[name] = joint_fit(*args, name, seed, options, step, facets=False)
-    scores = loo_stacking_weights({name: fits[name][0] for name in FAMILIES})
-    weights = np.array([scores[name]["weight"] for name in FAMILIES])
-    best = FAMILIES[int(np.argmax(weights))]
+    fits = _fit_each(FAMILIES, args, seed, options, progress, jobs)
+    scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+    if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) == "gensky-overcast":
+        fits |= _fit_each(OVERCAST_VARIANTS, args, seed, options, progress, jobs)
+        scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+    names = tuple(fits)
+    weights = np.array([scores[name]["weight"] for name in names])
+    best = names[int(np.argmax(weights))]
     idata, samples, used = fits[best]
     add_facet_posteriors(idata, samples, seed)  # of the most-weighted family only
     families = {  # each family's own gloss, before the mixture replaces the chosen one's
@@ -206,12 +248,12 @@ def fit_families(b, curves, y, usable, censored, keep, seed, options, progress=N
             **scores[name],
             "gamma": _quantiles(fits[name][0].posterior["gamma_object"].values, GAMMA_BOUNDS),
         }
-        for name in FAMILIES
+        for name in names
     }
-    own = [fits[n][0].posterior for n in FAMILIES]
+    own = [fits[n][0].posterior for n in names]
     mix_posteriors(idata, own, ("gamma_object", "n_object"), weights, np.random.default_rng(seed))
     idata.posterior.attrs["sky_family_weights"] = json.dumps(
-        {name: float(w) for name, w in zip(FAMILIES, weights, strict=True)}
+        {name: float(w) for name, w in zip(names, weights, strict=True)}
     )
     idata.posterior.attrs["sky_family_most_weight"] = best
     seconds = sum(fit[1].seconds for fit in fits.values()) + samples.facets.seconds

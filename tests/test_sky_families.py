@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -98,3 +99,81 @@ def test_stacking_weights_of_two_complementary_models():
     scores = sky_families.loo_stacking_weights(idatas)
     w = [scores[name]["weight"] for name in "ABC"]
     np.testing.assert_allclose(w, [0.5, 0.5, 0.0], atol=1e-3)
+
+
+def _fake_family_fits(monkeypatch, log_density: dict):
+    """joint_fit replaced by fits whose every entry has the log density
+    ``log_density[name]`` (default -6): which families were fitted, in order."""
+    import arviz as az
+
+    calls = []
+
+    def fake_fit(b, curves, y, usable, censored, keep, name, seed, options, *rest, **kw):
+        calls.append(name)
+        ll = np.full((2, 50, 3, 4), log_density.get(name, -6.0))
+        gamma = np.full((2, 50), 0.1 * len(calls))  # each fit its own answer
+        posterior = {"gamma_object": gamma, "n_object": np.ones((2, 50))}
+        idata = az.from_dict(posterior=posterior, log_likelihood={"y": ll})
+        samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+        return idata, samples, np.ones(4, bool)
+
+    monkeypatch.setattr(sky_families, "joint_fit", fake_fit)
+    monkeypatch.setattr(sky_families, "add_facet_posteriors", lambda *args: None)
+    return calls
+
+
+def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypatch):
+    # the data best predicted by a uniform sky: of the four families the
+    # overcast one predicts them best, so the variants are fitted and the
+    # uniform one takes the weight (an implementation that fitted the
+    # variants always, never, or did not restack would fail one of these)
+    args = (None,) * 6 + (0, {})
+    calls = _fake_family_fits(monkeypatch, {"gensky-uniform": -1.0, "gensky-overcast": -2.0})
+    idata, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
+    assert fam["most_weight"] == "gensky-uniform"
+    assert fam["families"]["gensky-uniform"]["weight"] > 0.99
+    assert np.all(idata.posterior["gamma_object"].values == pytest.approx(0.6))  # its own draws
+    # the option off: the four only, the overcast sky chosen
+    calls.clear()
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=False)
+    assert calls == list(sky_families.FAMILIES)
+    assert fam["most_weight"] == "gensky-overcast"
+    # a sun-lit day (the clear sky wins): the variants are not fitted, whatever the option
+    calls = _fake_family_fits(monkeypatch, {"gensky-clear": -1.0, "gensky-uniform": 0.0})
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    assert calls == list(sky_families.FAMILIES)
+    assert set(fam["families"]) == set(sky_families.FAMILIES)
+
+
+def test_cli_carries_overcast_variants_to_the_estimate(tmp_path, monkeypatch):
+    # one bundle: the flag reaches estimate_bundle; several: each unit's options
+    # (absent where not given, so that earlier runs keep their keys) and,
+    # through estimate_unit, estimate_bundle
+    from conftest import make_synthetic_bundle, planned_unit_options
+
+    from bayesgloss import cli
+
+    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
+    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--overcast-variants")
+    assert [u["overcast_variants"] for u in units] == [True, True]
+    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
+    assert all("overcast_variants" not in u for u in plain)
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def fake_estimate(b, **kwargs):
+        seen.append(kwargs["overcast_variants"])
+        raise Stop
+
+    monkeypatch.setattr(estimate, "estimate_bundle", fake_estimate)
+    with pytest.raises(Stop):
+        estimate.estimate_unit(**units[0])
+    with pytest.raises(Stop):
+        cli.main(["estimate", str(paths[0]), "--quiet"])
+    with pytest.raises(Stop):
+        cli.main(["estimate", str(paths[0]), "--quiet", "--overcast-variants"])
+    assert seen == [True, False, True]
