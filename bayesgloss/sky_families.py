@@ -34,6 +34,12 @@ gamma 0.244 went to gensky's intermediate sky with weight 1.00 and read
 90 % intervals holding the truth in 8 of 20 (9). About 2.3 times the
 mixture's time (four fits, run at once on ``jobs`` processes).
 
+With ``overcast_variants`` (``estimate --overcast-variants``, opt-in), a
+day whose stack gives gensky's overcast sky the most weight has two more
+overcast shapes fitted (:data:`OVERCAST_VARIANTS`) and all the fits stacked
+again: the first stack's losers keep their fits, so the answer is the
+stack of six where the day looks overcast and of four elsewhere.
+
 Entries of a facet's curve are not independent given the model (its
 errors are correlated in time), so LOO differences overstate how sure the
 choice is; where two families are close the weights say so and the
