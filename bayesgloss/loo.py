@@ -71,7 +71,7 @@ def loo_compare(fits: dict, *, problem: int | None = None) -> dict:
     return loo_table(terms)
 
 
-def loo_table(terms: dict) -> dict:
+def loo_table(terms: dict, *, method: str = "stacking", seed: int | None = None) -> dict:
     """PSIS-LOO comparison of models from their pointwise log likelihoods
     (:func:`arviz.compare`, stacking weights of Yao et al. 2018).
 
@@ -80,6 +80,13 @@ def loo_table(terms: dict) -> dict:
     terms : dict
         ``name -> ndarray (E, S, N)``: each model's log likelihood of the
         same N terms at its E x S draws.
+    method : {"stacking", "BB-pseudo-BMA", "pseudo-BMA"}
+        How :func:`arviz.compare` weighs the models: stacking of the
+        predictive distributions, or pseudo-BMA weights (proportional to
+        exp(elpd_loo); "BB-" with the Bayesian bootstrap's regularisation,
+        pseudo-BMA+ of Yao et al. 2018).
+    seed : int, optional
+        The Bayesian bootstrap's seed.
 
     Returns
     -------
@@ -91,7 +98,7 @@ def loo_table(terms: dict) -> dict:
     ks = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        table = az.compare(idatas, ic="loo", method="stacking")
+        table = az.compare(idatas, ic="loo", method=method, seed=seed)
         for name, idata in idatas.items():
             ks[name] = np.asarray(az.loo(idata, pointwise=True).pareto_k)
     for w in caught:  # surfaced in the result as flags, and logged
