@@ -54,6 +54,7 @@ SETS = {
     "validation_holdout2": "validation_holdout2",
     "validation_holdout3": "validation_holdout3",
     "validation_holdout4": "validation_holdout4",
+    "validation_holdout5": "validation_holdout5",
     "mitsuba_set": "validation_mitsuba",
 }
 RESULTS = HERE / "results"
@@ -81,6 +82,7 @@ ESTIMATES = {
 DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
+    "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
 }
 
 
