@@ -325,7 +325,7 @@ def estimate_bundle(
         With ``illumination="families"``: where gensky's overcast sky wins
         the stack, also fit the overcast shapes of
         :data:`bayesgloss.sky_families.OVERCAST_VARIANTS` and stack them all
-        (opt-in until it is tested on unseen renders).
+        (opt-in: on holdouts 4 and 5 it did not meet its rule, studies/README.md).
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
