@@ -91,8 +91,8 @@ FAMILIES = ("auto", *AUTO_SKIES)
 #: sky, 0.528 [0.229, 0.892] and 0.217 [0.028, 0.544] under their own
 #: (studies/README.md, stop 33). Fitted only where the overcast sky wins,
 #: the sun-lit days pay nothing. Opt-in: on holdouts 4 and 5 (24 unseen
-sunless Radiance days) it held the truth as often as the default but its
-MAE was higher (0.118 against 0.102 on holdout 5, with the weight shared).
+#: sunless Radiance days) it held the truth as often as the default but its
+#: MAE was higher (0.118 against 0.102 on holdout 5, with the weight shared).
 OVERCAST_VARIANTS = ("cie-3", "gensky-uniform")
 
 #: The overcast shapes as one group: their stacking weight's total shared by
