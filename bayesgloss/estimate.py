@@ -322,10 +322,8 @@ def estimate_bundle(
         ``faces-ground`` (unless no other facet is usable), or kept; default
         :data:`bayesgloss.ground_facing.DEFAULT_GROUND_FACING`.
     overcast_variants : bool
-        With ``illumination="families"``: where gensky's overcast sky wins
-        the stack, also fit the overcast shapes of
-        :data:`bayesgloss.sky_families.OVERCAST_VARIANTS` and stack them all
-        (opt-in: on holdouts 4 and 5 it did not meet its rule, studies/README.md).
+        With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
+        where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -384,19 +382,8 @@ def estimate_bundle(
     families = part = None
     if stacked is not None:
         fit, what, key = stacked
-        idata, samples, used, info = fit(
-            b,
-            curves,
-            y,
-            usable,
-            censored,
-            keep,
-            illumination,
-            seed,
-            sampler_options,
-            progress,
-            jobs,
-        )
+        data = (b, curves, y, usable, censored, keep, illumination, seed, sampler_options)
+        idata, samples, used, info = fit(*data, progress, jobs)
         families = info.pop("sky_families", None)
         part = key, info[key]
         run = {
@@ -406,18 +393,9 @@ def estimate_bundle(
             "model": f"joint, one fit per {what} (and sky family), stacked",
         }
     elif illumination == "families":
+        data = (b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs)
         idata, samples, used, families = sky_families.fit_families(
-            b,
-            curves,
-            y,
-            usable,
-            censored,
-            keep,
-            seed,
-            sampler_options,
-            progress,
-            jobs,
-            overcast_variants=overcast_variants,
+            *data, overcast_variants=overcast_variants
         )
         run = {
             "seconds": families.pop("seconds"),
