@@ -228,3 +228,24 @@ def planned_unit_options(monkeypatch, paths, out, *extra) -> list[dict]:
     with pytest.raises(Planned):
         cli.main(["estimate", *map(str, paths), "--out", str(out), "--quiet", *extra])
     return seen
+
+
+def estimate_bundle_options(monkeypatch, call) -> dict:
+    """The keyword arguments with which ``call()`` (``estimate.estimate_unit``
+    or ``cli.main`` of one bundle) reaches ``estimate.estimate_bundle``,
+    caught before any fit (``estimate_bundle`` replaced)."""
+    from bayesgloss import estimate
+
+    class Reached(Exception):
+        pass
+
+    seen = {}
+
+    def reach(b, **kwargs):
+        seen.update(kwargs)
+        raise Reached
+
+    monkeypatch.setattr(estimate, "estimate_bundle", reach)
+    with pytest.raises(Reached):
+        call()
+    return seen

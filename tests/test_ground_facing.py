@@ -82,7 +82,7 @@ def test_several_bundles_carry_ground_facing_into_their_units(tmp_path, monkeypa
     # over several bundles each is a unit of work: --ground-facing must reach each
     # unit's options (absent where not given: earlier runs keep their keys) and,
     # through estimate_unit, estimate_bundle
-    from conftest import make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
 
     paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
     units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--ground-facing", "keep")
@@ -90,16 +90,5 @@ def test_several_bundles_carry_ground_facing_into_their_units(tmp_path, monkeypa
     plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
     assert all("ground_facing" not in u for u in plain)
 
-    class Stop(Exception):
-        pass
-
-    seen = {}
-
-    def fake_estimate(b, **kwargs):
-        seen.update(kwargs)
-        raise Stop
-
-    monkeypatch.setattr(estimate, "estimate_bundle", fake_estimate)
-    with pytest.raises(Stop):
-        estimate.estimate_unit(**units[0])
+    seen = estimate_bundle_options(monkeypatch, lambda: estimate.estimate_unit(**units[0]))
     assert seen["ground_facing"] == "keep"
