@@ -345,6 +345,11 @@ def _holds(entry: dict, truth: float) -> bool:
     return lo <= truth <= hi
 
 
+def methods_run(scores: list[dict]) -> list[str]:
+    """The methods of :data:`METHODS` that any of ``scores`` holds, in that order."""
+    return [m for m in METHODS if any(m in s for s in scores)]
+
+
 def table(scores: list[dict]) -> dict:
     """Per category and method: MAE and 90 % coverage on direct-sun sequences,
     and the overcast sequences' outcome."""
@@ -354,7 +359,7 @@ def table(scores: list[dict]) -> dict:
         rows = [s for s in scores if cat in ("all", s["category"]) and s["truth"] is not None]
         sun = [s for s in rows if s["direct_sun"]]
         entry = {"sequences": len(rows), "direct_sun": len(sun)}
-        for m in (m for m in METHODS if any(m in s for s in scores)):  # the methods run
+        for m in methods_run(scores):
             err = [abs(s[m]["median"] - s["truth"]) for s in sun if m in s]
             e = {"mae_direct_sun": float(np.mean(err)) if err else None}
             if m != "baseline":
@@ -486,37 +491,26 @@ def family_table(scores: list[dict]) -> dict:
     (:func:`named_family`): named right for gensky's skies (the issue's
     goal: at least 90 %), and what wins for the others, with the stack's
     weight of the winner (median over the category's sequences)."""
-    out = {}
+    out, weights, named = {}, {}, []
     for s in scores:
         method, entry = _naming_entry(s)
         win = None if entry is None else named_family(entry)
         if win is None:
             continue
-        row = out.setdefault(
-            s["category"], {"sequences": 0, "method": method, "most_weight": {}, "right": 0}
-        )
+        cat = s["category"]
+        row = out.setdefault(cat, {"sequences": 0, "method": method, "most_weight": {}, "right": 0})
         row["sequences"] += 1
         row["most_weight"][win] = row["most_weight"].get(win, 0) + 1
         row["right"] += GENSKY_FAMILIES.get(s["sky"]) == win
-        stack = entry.get("sky_families")
-        if stack:
-            row.setdefault("_weights", []).append(stack["families"][stack["most_weight"]]["weight"])
-    for row in out.values():
-        weights = row.pop("_weights", None)
-        if weights:
-            row["median_weight"] = float(np.median(weights))
-    # every sequence rendered under one of gensky's skies, whatever its category
-    # (an auto-exposure day's sky is one of them too)
-    named = [
-        (GENSKY_FAMILIES[s["sky"]], named_family(_naming_entry(s)[1] or {}))
-        for s in scores
-        if s.get("sky") in GENSKY_FAMILIES
-    ]
-    named = [(sky, win) for sky, win in named if win is not None]
-    out["gensky_named_right"] = {
-        "right": sum(sky == win for sky, win in named),
-        "sequences": len(named),
-    }
+        if stack := entry.get("sky_families"):
+            weights.setdefault(cat, []).append(stack["families"][stack["most_weight"]]["weight"])
+        # every sequence rendered under one of gensky's skies, whatever its
+        # category (an auto-exposure day's sky is one of them too)
+        if s.get("sky") in GENSKY_FAMILIES:
+            named.append(GENSKY_FAMILIES[s["sky"]] == win)
+    for cat, w in weights.items():
+        out[cat]["median_weight"] = float(np.median(w))
+    out["gensky_named_right"] = {"right": sum(named), "sequences": len(named)}
     return out
 
 
@@ -584,7 +578,7 @@ def write_summary(scores: list[dict], set_name: str, max_sweeps: int) -> dict:
     summary["broken_cloud_sun"] = sun_figure(
         scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
     )
-    run = [m for m in METHODS if any(m in s for s in scores)]
+    run = methods_run(scores)
     title = "Mitsuba validation set" if set_name == "mitsuba_set" else "Radiance validation set"
     figure(scores, RESULTS / f"{name}.png", run, title)
     calibration = calibration_figure(scores, RESULTS / f"{name}_calibration.png", run)
