@@ -251,6 +251,7 @@ def _estimate(args: argparse.Namespace) -> int:
         occluder_albedo=args.occluder_albedo,
         ground_facing=args.ground_facing,
         overcast_variants=args.overcast_variants,
+        unreliable_loo=args.unreliable_loo or "stack",
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -355,6 +356,7 @@ def _estimate_many(args, progress) -> int:
                 **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
                 **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
                 **({"overcast_variants": True} if args.overcast_variants else {}),
+                **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
                 "bundle_content": content,
             },
         )
@@ -521,7 +523,7 @@ def _parser() -> argparse.ArgumentParser:
     from .lobes import LOBE_FAMILIES
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
     from .render import OCCLUDER_REFLECTANCE
-    from .sky_families import OVERCAST_VARIANTS
+    from .sky_families import OVERCAST_VARIANTS, UNRELIABLE_LOO_SHARE
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -655,6 +657,16 @@ def _parser() -> argparse.ArgumentParser:
         f"also fit the overcast shapes {', '.join(OVERCAST_VARIANTS)}, their weight shared "
         "by pseudo-BMA+ (bayesgloss.sky_families; opt-in: on two unseen sets of sunless "
         "days it held the truth as often as the default, with a higher MAE)",
+    )
+    es.add_argument(
+        "--unreliable-loo",
+        default=None,
+        choices=("stack", "equal"),
+        help="with the sky families: where more than "
+        f"{100 * UNRELIABLE_LOO_SHARE:g} %% of the entries' PSIS-LOO is unreliable (Pareto k > 0.7, "
+        "as on objects of 1-3 facets), keep the stacking weights and flag loo-unreliable "
+        "(default 'stack'), or average the families with equal weights and flag "
+        "sky-family-not-identifiable ('equal'; bayesgloss.sky_families)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

@@ -140,7 +140,6 @@ __all__ = [
     "EstimateResult",
     "estimate_bundle",
     "to_inference_data",
-    "convergence",
 ]
 
 #: Usable frames a facet's curve needs at least.
@@ -184,35 +183,6 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     usable = curves.valid | censored
     y = np.where(censored, curves.lower_bound, curves.luminance)
     return np.where(usable, y, 0.0), usable, censored
-
-
-def convergence(idata, facet_runs=None) -> dict:
-    """R-hat and bulk/tail ESS of gamma per facet, and whether each converged
-    (the rule of :mod:`bayesgloss.diagnostics`).
-
-    ``facet_runs``: the per-facet sampler's run given the object's
-    illumination (:func:`bayesgloss.sampling.facets_given_frames`, copies of
-    every facet at several illumination draws). Then each copy is diagnosed
-    on its own chains and a facet converged if every copy did (R-hat the
-    worst copy's, ESS the copies' sum): across the pooled chains, which hold
-    different illumination draws by design, R-hat measures the light's
-    spread, not the sampler's (the demo once printed 0 of 28 facets
-    converged for that reason alone).
-    """
-    gamma = np.moveaxis(idata.posterior["gamma"].values, -1, 0)  # (F, E, S)
-    if facet_runs is not None and facet_runs.draws.shape[0] % gamma.shape[0] == 0:
-        f = gamma.shape[0]
-        rhat, ess_bulk, ess_tail, ok = (
-            np.asarray(x).reshape(-1, f) for x in diagnostics.diagnose(facet_runs.draws[..., 0])
-        )
-        return {
-            "rhat": rhat.max(0),
-            "ess_bulk": ess_bulk.sum(0),
-            "ess_tail": ess_tail.sum(0),
-            "converged": ok.all(0),
-        }
-    rhat, ess_bulk, ess_tail, ok = diagnostics.diagnose(gamma)
-    return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail, "converged": ok}
 
 
 #: The posterior of gamma of a facet or object is "not identifiable" when its
@@ -264,6 +234,7 @@ def estimate_bundle(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
+    unreliable_loo: str = "stack",
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -324,6 +295,11 @@ def estimate_bundle(
     overcast_variants : bool
         With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
         where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
+    unreliable_loo : {"stack", "equal"}
+        With the sky families, where the stacking weights rest on unreliable
+        PSIS-LOO: kept (flagged ``loo-unreliable``), or equal weights
+        (flagged ``sky-family-not-identifiable``;
+        :func:`bayesgloss.sky_families.equal_when_unreliable`).
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -395,7 +371,7 @@ def estimate_bundle(
     elif illumination == "families":
         data = (b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs)
         idata, samples, used, families = sky_families.fit_families(
-            *data, overcast_variants=overcast_variants
+            *data, overcast_variants=overcast_variants, unreliable_loo=unreliable_loo
         )
         run = {
             "seconds": families.pop("seconds"),
@@ -442,6 +418,7 @@ def estimate_bundle(
     )
     if families is not None:
         out.summary["sky_families"] = families
+        out.summary["object"]["flags"] += sky_families.stack_flags(families)
     if part is not None:  # each choice's weight, LOO and own gloss
         out.summary[part[0]] = part[1]
     return out
@@ -459,7 +436,7 @@ def _summarise(
     """The summary of an estimate and its result; ``facing``: the facets left
     out as facing the ground (:mod:`bayesgloss.ground_facing`)."""
     ids = curves.ids[keep]
-    diag = convergence(idata, getattr(samples, "facets", None))
+    diag = diagnostics.gamma_convergence(idata, getattr(samples, "facets", None))
     data_priors = lk.Priors()
 
     gam = idata.posterior["gamma"].values  # (E, S, F)
@@ -594,6 +571,7 @@ def estimate_unit(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
+    unreliable_loo: str = "stack",
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -604,7 +582,7 @@ def estimate_unit(
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
     changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
-    ``ground_facing`` and ``overcast_variants``: as :func:`estimate_bundle`'s
+    ``ground_facing``, ``overcast_variants`` and ``unreliable_loo``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -628,5 +606,6 @@ def estimate_unit(
         occluder_albedo=occluder_albedo,
         ground_facing=ground_facing,
         overcast_variants=overcast_variants,
+        unreliable_loo=unreliable_loo,
     )
     return result_files(res)

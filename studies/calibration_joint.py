@@ -103,7 +103,7 @@ import pandas as pd
 from validation_set import _labels, _sun_z, _uniform, _utc_offset_hours  # the same draws
 
 from bayesgloss import bundle as bundle_io
-from bayesgloss import estimate, pooling, render, runner, sequences, sky, sun
+from bayesgloss import diagnostics, estimate, pooling, render, runner, sequences, sky, sun
 from bayesgloss import illumination as il
 from bayesgloss import likelihood as lk
 
@@ -570,7 +570,7 @@ def object_posterior(result, seed: int) -> tuple[np.ndarray, bool]:
     if "gamma_object" in idata.posterior:
         mu = idata.posterior["gamma_object"].values.ravel()
     else:
-        diag = estimate.convergence(idata)
+        diag = diagnostics.gamma_convergence(idata)
         conv = np.asarray(diag["converged"], bool)
         gam = idata.posterior["gamma"].values  # (E, S, F)
         per_facet = gam.transpose(2, 0, 1).reshape(gam.shape[-1], -1)

@@ -55,6 +55,7 @@ SETS = {
     "validation_holdout3": "validation_holdout3",
     "validation_holdout4": "validation_holdout4",
     "validation_holdout5": "validation_holdout5",
+    "validation_holdout6": "validation_holdout6",
     "mitsuba_set": "validation_mitsuba",
 }
 RESULTS = HERE / "results"
@@ -63,7 +64,7 @@ RESULTS = HERE / "results"
 QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
-    "fresnel", "schlick", "lobes",
+    "loo-equal", "fresnel", "schlick", "lobes",
 )  # fmt: skip
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
@@ -74,6 +75,8 @@ ESTIMATES = {
     "ground-kept": {"per_frame": True, "illumination": "families", "ground_facing": "keep"},
     # the default with CIE type 3 and a uniform sky fitted where the overcast sky wins
     "overcast-variants": {"per_frame": True, "illumination": "families", "overcast_variants": True},
+    # the default with equal weights where the stack's PSIS-LOO is unreliable
+    "loo-equal": {"per_frame": True, "illumination": "families", "unreliable_loo": "equal"},
     "fresnel": {"per_frame": True, "illumination": "families", "fresnel": "radiance"},
     "schlick": {"per_frame": True, "illumination": "families", "fresnel": "schlick"},
     "lobes": {"per_frame": True, "illumination": "families", "lobe": "families"},
@@ -83,6 +86,7 @@ DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
+    "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
 }
 
 
@@ -128,6 +132,15 @@ def _overcast_lost(entry: dict | None) -> bool:
     the same fit as the default's, same seed)."""
     stack = (entry or {}).get("sky_families")
     return bool(stack) and stack["most_weight"] != "gensky-overcast"
+
+
+def _loo_reliable(entry: dict | None) -> bool:
+    """Whether a default estimate's stack rests on reliable PSIS-LOO (so
+    ``unreliable_loo="equal"`` keeps its weights: the same fit, same seed)."""
+    from bayesgloss.sky_families import UNRELIABLE_LOO_SHARE
+
+    stack = (entry or {}).get("sky_families")
+    return bool(stack) and stack.get("high_k_share", 1.0) <= UNRELIABLE_LOO_SHARE
 
 
 def _faces_ground(b) -> bool:
@@ -247,6 +260,9 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
             continue
         if name == "overcast-variants" and _overcast_lost(out.get("families")):
             out[name] = {**out["families"], "same_fit_as": "families"}  # no variant fitted
+            continue
+        if name == "loo-equal" and _loo_reliable(out.get("families")):
+            out[name] = {**out["families"], "same_fit_as": "families"}  # weights kept
             continue
         per_frame = kwargs["per_frame"]
         t0 = time.perf_counter()

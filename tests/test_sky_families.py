@@ -101,16 +101,20 @@ def test_stacking_weights_of_two_complementary_models():
     np.testing.assert_allclose(w, [0.5, 0.5, 0.0], atol=1e-3)
 
 
-def _fake_family_fits(monkeypatch, log_density: dict):
+def _fake_family_fits(monkeypatch, log_density: dict, spread: dict | None = None):
     """joint_fit replaced by fits whose every entry has the log density
-    ``log_density[name]`` (default -6): which families were fitted, in order."""
+    ``log_density[name]`` (default -6), spread over the draws with sd
+    ``spread[name]`` (default 0: every Pareto k low): which families were
+    fitted, in order."""
     import arviz as az
 
     calls = []
+    rng = np.random.default_rng(11)
 
     def fake_fit(b, curves, y, usable, censored, keep, name, seed, options, *rest, **kw):
         calls.append(name)
         ll = np.full((2, 50, 3, 4), log_density.get(name, -6.0))
+        ll = ll + (spread or {}).get(name, 0.0) * rng.standard_normal(ll.shape)
         gamma = np.full((2, 50), 0.1 * len(calls))  # each fit its own answer
         posterior = {"gamma_object": gamma, "n_object": np.ones((2, 50))}
         idata = az.from_dict(posterior=posterior, log_likelihood={"y": ll})
@@ -192,3 +196,79 @@ def test_tied_overcast_shapes_share_their_weight(monkeypatch):
     calls = _fake_family_fits(monkeypatch, {**near, "gensky-uniform": 0.0})
     _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
     assert fam["families"]["gensky-uniform"]["weight"] > 0.99
+
+
+def test_high_k_share_weighs_each_fit_by_its_stacking_weight():
+    # 90 % of the weight on a fit with 30 of 100 entries unreliable, 10 % on
+    # one with none: 0.27 of what the weights rest on (an unweighted mean
+    # would say 0.15, the winner's alone 0.30)
+    scores = {
+        "a": {"weight": 0.9, "high_k": 30, "entries": 100},
+        "b": {"weight": 0.1, "high_k": 0, "entries": 100},
+    }
+    assert sky_families.high_k_share(scores) == pytest.approx(0.27)
+    equal = sky_families.equal_when_unreliable(scores)
+    assert [equal[n]["weight"] for n in "ab"] == [0.5, 0.5]
+    assert [equal[n]["stacking_weight"] for n in "ab"] == [0.9, 0.1]
+    # 5 of 100 on the winner: below one in ten, the weights are kept
+    scores["a"]["high_k"] = 5
+    assert sky_families.equal_when_unreliable(scores) is scores
+
+
+def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
+    # the clear sky predicts best by 1 nat an entry, but every entry's log
+    # density spreads over the draws with sd 5 in every fit (PSIS's Pareto k
+    # far above 0.7 for most entries: the situation of a 1-3 facet object,
+    # whose frames' brightnesses rest on an entry or three). "stack" keeps
+    # the clear sky's weight and flags the reliance; "equal" mixes the four
+    # fits' answers equally (0.1-0.4, each fit's gamma 0.1 x its place), the
+    # facets still the clear sky's, and flags the family as not identified
+    args = (None,) * 6 + (0, {})
+    spread = dict.fromkeys(sky_families.FAMILIES, 5.0)
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
+    _, _, _, kept = sky_families.fit_families(*args, unreliable_loo="stack")
+    assert kept["high_k_share"] > 0.5
+    assert not kept["equal_weights"]
+    assert sky_families.stack_flags(kept) == ["loo-unreliable"]
+    assert kept["families"]["gensky-clear"]["weight"] > 0.5  # the most, though noisy
+
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
+    idata, _, _, equal = sky_families.fit_families(*args, unreliable_loo="equal")
+    assert equal["equal_weights"]
+    assert equal["most_weight"] == "gensky-clear"  # by its stacking weight
+    assert [f["weight"] for f in equal["families"].values()] == [0.25] * 4
+    assert equal["families"]["gensky-clear"]["stacking_weight"] > 0.5
+    assert sky_families.stack_flags(equal) == ["sky-family-not-identifiable"]
+    gamma = idata.posterior["gamma_object"].values
+    shares = [np.mean(gamma.round(9) == g) for g in (0.1, 0.2, 0.3, 0.4)]
+    np.testing.assert_allclose(shares, 0.25, atol=0.08)  # 100 draws: sd of a share 0.04
+
+    # reliable entries (sd 0.05 over the draws: k well below 0.7; arviz
+    # gives a constant log density k = inf): "equal" keeps the stacking
+    # weights, no flag
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, dict.fromkeys(spread, 0.05))
+    _, _, _, fam = sky_families.fit_families(*args, unreliable_loo="equal")
+    assert fam["high_k_share"] == 0.0 and not fam["equal_weights"]
+    assert fam["families"]["gensky-clear"]["weight"] > 0.99
+    assert sky_families.stack_flags(fam) == []
+    with pytest.raises(ValueError, match="unreliable_loo"):
+        sky_families.fit_families(*args, unreliable_loo="pseudo-bma")
+
+
+def test_cli_carries_unreliable_loo_to_the_estimate(tmp_path, monkeypatch):
+    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
+
+    from bayesgloss import cli
+
+    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
+    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--unreliable-loo", "equal")
+    assert [u["unreliable_loo"] for u in units] == ["equal", "equal"]
+    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
+    assert all("unreliable_loo" not in u for u in plain)
+    calls = (
+        lambda: estimate.estimate_unit(**units[0]),
+        lambda: cli.main(["estimate", str(paths[0]), "--quiet"]),
+        lambda: cli.main(["estimate", str(paths[0]), "--quiet", "--unreliable-loo", "equal"]),
+    )
+    seen = [estimate_bundle_options(monkeypatch, call)["unreliable_loo"] for call in calls]
+    assert seen == ["equal", "stack", "equal"]
