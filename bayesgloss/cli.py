@@ -289,10 +289,19 @@ def _print_estimate(name, summary) -> None:
             f"  within the model [90 %: {_interval(o['gamma_within_model'])}]; model error sd "
             f"{e['sd']:.3f} (floor {e['floor']:.3f}, facets' disagreement {e['facets_sd']:.3f})"
         )
+    if o.get("flags"):
+        print(f"  object flags: {', '.join(o['flags'])}")
     if "sky_families" in summary:  # the stacked day-level sky families
-        fam = summary["sky_families"]["families"]
+        stack = summary["sky_families"]
+        fam = stack["families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
-        print(f"sky families (stacking weight): {weights}")
+        kind = "equal weight" if stack.get("equal_weights") else "stacking weight"
+        print(f"sky families ({kind}): {weights}")
+        if "high_k_share" in stack:
+            print(
+                f"  {stack['high_k_share']:.0%} of the entries' PSIS-LOO unreliable "
+                "(Pareto k > 0.7, weighted by the families' stacking weights)"
+            )
     if "lobe_families" in summary:  # the stacked lobe families (estimate --lobe families)
         fam = summary["lobe_families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
@@ -663,10 +672,10 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         choices=("stack", "equal"),
         help="with the sky families: where more than "
-        f"{100 * UNRELIABLE_LOO_SHARE:g} %% of the entries' PSIS-LOO is unreliable (Pareto k > 0.7, "
-        "as on objects of 1-3 facets), keep the stacking weights and flag loo-unreliable "
-        "(default 'stack'), or average the families with equal weights and flag "
-        "sky-family-not-identifiable ('equal'; bayesgloss.sky_families)",
+        f"{100 * UNRELIABLE_LOO_SHARE:g} %% of the entries' PSIS-LOO is unreliable "
+        "(Pareto k > 0.7, as on objects of 1-3 facets), keep the stacking weights and "
+        "flag loo-unreliable (default 'stack'), or average the families with equal "
+        "weights and flag sky-family-not-identifiable ('equal'; bayesgloss.sky_families)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

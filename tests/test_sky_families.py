@@ -272,3 +272,35 @@ def test_cli_carries_unreliable_loo_to_the_estimate(tmp_path, monkeypatch):
     )
     seen = [estimate_bundle_options(monkeypatch, call)["unreliable_loo"] for call in calls]
     assert seen == ["equal", "stack", "equal"]
+
+
+def test_printed_estimate_says_when_the_weights_are_equal(capsys):
+    # the object's flags and the weights' kind reach the printed summary: a
+    # user reading "stacking weight" beside equal weights would take the
+    # guard's 1/4 for what the data said
+    from bayesgloss import cli
+
+    q = {"median": 0.5, "q05": 0.1, "q95": 0.9, "hdi90": [0.1, 0.9]}
+    stack = {
+        "families": {n: {"weight": 0.25} for n in sky_families.FAMILIES},
+        "high_k_share": 0.62,
+        "equal_weights": True,
+    }
+    summary = {
+        "illumination": "families",
+        "noise": "relative",
+        "camera": "linear",
+        "object": {
+            "gamma": q,
+            "facets_converged": 3,
+            "facets": 3,
+            "flags": ["sky-family-not-identifiable"],
+        },
+        "sky_families": stack,
+        "facets": [],
+    }
+    cli._print_estimate("b", summary)
+    out = capsys.readouterr().out
+    assert "object flags: sky-family-not-identifiable" in out
+    assert "sky families (equal weight): auto 0.25" in out
+    assert "62% of the entries' PSIS-LOO unreliable" in out
