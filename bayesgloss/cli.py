@@ -251,7 +251,7 @@ def _estimate(args: argparse.Namespace) -> int:
         occluder_albedo=args.occluder_albedo,
         ground_facing=args.ground_facing,
         overcast_variants=args.overcast_variants,
-        unreliable_loo=args.unreliable_loo or "stack",
+        unreliable_loo=args.unreliable_loo or "equal",
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -670,12 +670,12 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--unreliable-loo",
         default=None,
-        choices=("stack", "equal"),
+        choices=("equal", "stack"),
         help="with the sky families: where more than "
         f"{100 * UNRELIABLE_LOO_SHARE:g} %% of the entries' PSIS-LOO is unreliable "
-        "(Pareto k > 0.7, as on objects of 1-3 facets), keep the stacking weights and "
-        "flag loo-unreliable (default 'stack'), or average the families with equal "
-        "weights and flag sky-family-not-identifiable ('equal'; bayesgloss.sky_families)",
+        "(Pareto k > 0.7, as on objects of 1-3 facets), average the families with equal "
+        "weights and flag sky-family-not-identifiable (default 'equal'), or keep the "
+        "stacking weights and flag loo-unreliable ('stack'; bayesgloss.sky_families)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

@@ -234,7 +234,7 @@ def estimate_bundle(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
-    unreliable_loo: str = "stack",
+    unreliable_loo: str = "equal",
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -295,11 +295,12 @@ def estimate_bundle(
     overcast_variants : bool
         With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
         where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
-    unreliable_loo : {"stack", "equal"}
+    unreliable_loo : {"equal", "stack"}
         With the sky families, where the stacking weights rest on unreliable
-        PSIS-LOO: kept (flagged ``loo-unreliable``), or equal weights
-        (flagged ``sky-family-not-identifiable``;
-        :func:`bayesgloss.sky_families.equal_when_unreliable`).
+        PSIS-LOO: equal weights, the default (flagged
+        ``sky-family-not-identifiable``;
+        :func:`bayesgloss.sky_families.equal_when_unreliable`), or kept
+        (flagged ``loo-unreliable``).
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -571,7 +572,7 @@ def estimate_unit(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
-    unreliable_loo: str = "stack",
+    unreliable_loo: str = "equal",
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 

@@ -222,7 +222,9 @@ def posterior_report(
     ax.set(xlabel="gamma [-]", ylabel="facets", title="(d) object gloss", xlim=(0, 1))
     ax.legend(fontsize=8, loc="upper center")
     weights = _model_weights(summary)
-    if weights:  # the stacked sky, lobe and faces' albedo weights
+    if obj_flags := summary["object"].get("flags"):
+        weights = "\n".join(filter(None, [weights, "object: " + ", ".join(obj_flags)]))
+    if weights:  # the stacked sky, lobe and faces' albedo weights, the object's flags
         ax.text(0.02, 0.02, weights, transform=ax.transAxes, fontsize=7, va="bottom", ha="left")
 
     # (e) three facets: the least and most glossy and the middle one, with bands
@@ -281,7 +283,9 @@ def _model_weights(summary) -> str:
     lines = []
     sky = summary.get("sky_families", {}).get("families")
     if sky:
-        lines.append("sky: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in sky.items()))
+        equal = summary["sky_families"].get("equal_weights")
+        label = "sky (equal: PSIS-LOO unreliable)" if equal else "sky"
+        lines.append(f"{label}: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in sky.items()))
     lobes = summary.get("lobe_families")
     if lobes:
         lines.append("lobe: " + ", ".join(f"{k} {v['weight']:.2f}" for k, v in lobes.items()))
@@ -310,7 +314,8 @@ def _illumination_panel(ax, idata) -> None:
     title = "(h) each frame's illumination, inferred with the facets (90 %)"
     if "sky_family_weights" in idata.posterior.attrs:  # stacked day-level families
         weights = json.loads(idata.posterior.attrs["sky_family_weights"])
-        title += "\nsky families (stacking weight): " + ", ".join(
+        kind = "equal" if idata.posterior.attrs.get("sky_family_equal_weights") else "stacking"
+        title += f"\nsky families ({kind} weight): " + ", ".join(
             f"{name} {w:.2f}" for name, w in weights.items()
         )
     ax.set_title(title, fontsize=9)

@@ -201,7 +201,7 @@ def fit_stacked(
         idata, [own[k] for k in labels], mixed, weights, np.random.default_rng(seed)
     )
     if sky_info is not None and best != default:  # keep the sky's record
-        for key in ("sky_family_weights", "sky_family_most_weight"):
+        for key in ("sky_family_weights", "sky_family_most_weight", "sky_family_equal_weights"):
             idata.posterior.attrs[key] = own[default].attrs[key]
     idata.posterior.attrs[f"{attribute}_weights"] = json.dumps(
         {label: float(w) for label, w in zip(labels, weights, strict=True)}

@@ -104,17 +104,18 @@ def test_stacking_weights_of_two_complementary_models():
 def _fake_family_fits(monkeypatch, log_density: dict, spread: dict | None = None):
     """joint_fit replaced by fits whose every entry has the log density
     ``log_density[name]`` (default -6), spread over the draws with sd
-    ``spread[name]`` (default 0: every Pareto k low): which families were
-    fitted, in order."""
+    ``spread[name]`` (default 0.05: every Pareto k low; a constant log
+    density gets k = inf from arviz), the same standard normal pattern in
+    every fit (their differences exact): which families were fitted, in order."""
     import arviz as az
 
     calls = []
-    rng = np.random.default_rng(11)
 
     def fake_fit(b, curves, y, usable, censored, keep, name, seed, options, *rest, **kw):
         calls.append(name)
         ll = np.full((2, 50, 3, 4), log_density.get(name, -6.0))
-        ll = ll + (spread or {}).get(name, 0.0) * rng.standard_normal(ll.shape)
+        z = np.random.default_rng(11).standard_normal(ll.shape)
+        ll = ll + (spread or {}).get(name, 0.05) * z
         gamma = np.full((2, 50), 0.1 * len(calls))  # each fit its own answer
         posterior = {"gamma_object": gamma, "n_object": np.ones((2, 50))}
         idata = az.from_dict(posterior=posterior, log_likelihood={"y": ll})
@@ -243,10 +244,9 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
     shares = [np.mean(gamma.round(9) == g) for g in (0.1, 0.2, 0.3, 0.4)]
     np.testing.assert_allclose(shares, 0.25, atol=0.08)  # 100 draws: sd of a share 0.04
 
-    # reliable entries (sd 0.05 over the draws: k well below 0.7; arviz
-    # gives a constant log density k = inf): "equal" keeps the stacking
-    # weights, no flag
-    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, dict.fromkeys(spread, 0.05))
+    # reliable entries (sd 0.05 over the draws: k well below 0.7): "equal"
+    # keeps the stacking weights, no flag
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0})
     _, _, _, fam = sky_families.fit_families(*args, unreliable_loo="equal")
     assert fam["high_k_share"] == 0.0 and not fam["equal_weights"]
     assert fam["families"]["gensky-clear"]["weight"] > 0.99
@@ -261,17 +261,17 @@ def test_cli_carries_unreliable_loo_to_the_estimate(tmp_path, monkeypatch):
     from bayesgloss import cli
 
     paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--unreliable-loo", "equal")
-    assert [u["unreliable_loo"] for u in units] == ["equal", "equal"]
+    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--unreliable-loo", "stack")
+    assert [u["unreliable_loo"] for u in units] == ["stack", "stack"]
     plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
     assert all("unreliable_loo" not in u for u in plain)
     calls = (
         lambda: estimate.estimate_unit(**units[0]),
         lambda: cli.main(["estimate", str(paths[0]), "--quiet"]),
-        lambda: cli.main(["estimate", str(paths[0]), "--quiet", "--unreliable-loo", "equal"]),
+        lambda: cli.main(["estimate", str(paths[0]), "--quiet", "--unreliable-loo", "stack"]),
     )
     seen = [estimate_bundle_options(monkeypatch, call)["unreliable_loo"] for call in calls]
-    assert seen == ["equal", "stack", "equal"]
+    assert seen == ["stack", "equal", "stack"]  # the default: equal weights
 
 
 def test_printed_estimate_says_when_the_weights_are_equal(capsys):
@@ -304,3 +304,6 @@ def test_printed_estimate_says_when_the_weights_are_equal(capsys):
     assert "object flags: sky-family-not-identifiable" in out
     assert "sky families (equal weight): auto 0.25" in out
     assert "62% of the entries' PSIS-LOO unreliable" in out
+    from bayesgloss import report
+
+    assert report._model_weights(summary).startswith("sky (equal: PSIS-LOO unreliable): auto 0.25")
