@@ -658,6 +658,13 @@ def object_record(obj: dict, result, sim_out: dict, levels, seconds: float, caug
         "facets_converged": o["facets_converged"],
         "illumination": s["illumination"],
         "sky_models": s.get("sky_models"),
+        # how much the sky families' weights rest on unreliable PSIS-LOO, and
+        # whether they were made equal for it (sky_families.equal_when_unreliable)
+        "sky_families": {
+            k: s["sky_families"].get(k) for k in ("most_weight", "high_k_share", "equal_weights")
+        }
+        if "sky_families" in s
+        else None,
         "model": s["sampler"]["model"],
         "sweeps": s["sampler"].get("sweeps"),
         "sampler_seconds": s["sampler"]["seconds"],
@@ -1016,6 +1023,13 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default=str(CONFIG))
     ap.add_argument("--n", type=int, default=None, help="the first N objects (default: all)")
+    ap.add_argument(
+        "--shape",
+        nargs="*",
+        choices=("hemisphere", "box", "gem"),
+        default=None,
+        help="fit only the objects of these shapes (a subset's check; default: all)",
+    )
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default=str(RESULTS), help="results folder (default %(default)s)")
     ap.add_argument("--cache", default=str(CACHE), help="object cache (default %(default)s)")
@@ -1046,6 +1060,8 @@ def main(argv=None) -> dict:
         return {"objects": objects}
 
     chosen = objects if args.n is None else objects[: args.n]
+    if args.shape:
+        chosen = [o for o in chosen if o["shape"] in args.shape]
     sampler_options = dict(cfg["fit"]["sampler_options"])
     if args.max_sweeps is not None:
         sampler_options["max_sweeps"] = args.max_sweeps
@@ -1056,6 +1072,7 @@ def main(argv=None) -> dict:
         "run": {
             "objects": len(chosen),
             "complete": len(chosen) == cfg["n_objects"] and not sampler_options,
+            "shapes": args.shape or "all",
             "sampler_options": sampler_options,
             "code": code_hash(),
             "auto_skies": list(getattr(estimate, "AUTO_SKIES", [])),
