@@ -249,3 +249,36 @@ def estimate_bundle_options(monkeypatch, call) -> dict:
     with pytest.raises(Reached):
         call()
     return seen
+
+
+def estimate_option_route(monkeypatch, tmp_path, flag: list, key: str) -> dict:
+    """Where ``bayesgloss estimate``'s CLI arguments ``flag`` take the option
+    ``key`` of :func:`bayesgloss.estimate.estimate_bundle`, caught before any
+    fit.
+
+    Returns
+    -------
+    dict
+        ``units``: its value in each unit planned over two bundles with
+        ``flag``; ``plain_units_have_key``: whether any unit planned without
+        ``flag`` holds the key (none must: earlier runs keep their units'
+        keys); ``estimate_bundle``: the value ``estimate_bundle`` gets through
+        ``estimate_unit`` of the first unit, a one-bundle run without
+        ``flag`` and one with it.
+    """
+    from bayesgloss import cli, estimate
+
+    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
+    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", *flag)
+    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
+    one = ["estimate", str(paths[0]), "--quiet"]
+    calls = (
+        lambda: estimate.estimate_unit(**units[0]),
+        lambda: cli.main(one),
+        lambda: cli.main([*one, *flag]),
+    )
+    return {
+        "units": [u[key] for u in units],
+        "plain_units_have_key": any(key in u for u in plain),
+        "estimate_bundle": [estimate_bundle_options(monkeypatch, c)[key] for c in calls],
+    }

@@ -267,13 +267,9 @@ def test_several_bundles_carry_the_fresnel_model_into_their_units(tmp_path, monk
     # reach every unit's options (a unit without it would run the default
     # model silently), and be absent where not given (the units' keys of
     # earlier runs unchanged)
-    from conftest import make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_option_route
 
-    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    seen = [
-        planned_unit_options(monkeypatch, paths, tmp_path / "out", *extra)
-        for extra in (["--fresnel", "radiance"], [])
-    ]
-    with_fresnel, without = seen
-    assert [u["fresnel"] for u in with_fresnel] == ["radiance", "radiance"]
-    assert all("fresnel" not in u for u in without)
+    route = estimate_option_route(monkeypatch, tmp_path, ["--fresnel", "radiance"], "fresnel")
+    assert route["units"] == ["radiance", "radiance"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["radiance", None, "radiance"]  # None: the default

@@ -82,13 +82,11 @@ def test_several_bundles_carry_ground_facing_into_their_units(tmp_path, monkeypa
     # over several bundles each is a unit of work: --ground-facing must reach each
     # unit's options (absent where not given: earlier runs keep their keys) and,
     # through estimate_unit, estimate_bundle
-    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_option_route
 
-    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--ground-facing", "keep")
-    assert [u["ground_facing"] for u in units] == ["keep", "keep"]
-    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
-    assert all("ground_facing" not in u for u in plain)
-
-    seen = estimate_bundle_options(monkeypatch, lambda: estimate.estimate_unit(**units[0]))
-    assert seen["ground_facing"] == "keep"
+    route = estimate_option_route(
+        monkeypatch, tmp_path, ["--ground-facing", "keep"], "ground_facing"
+    )
+    assert route["units"] == ["keep", "keep"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["keep", None, "keep"]  # None: the library's default

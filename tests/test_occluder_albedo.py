@@ -153,11 +153,11 @@ def test_several_bundles_carry_the_occluder_albedo_into_their_units(tmp_path, mo
     # estimate over several bundles runs each as a unit of work: the option must
     # reach each unit's options and, through estimate_unit, estimate_bundle (a
     # unit function without the parameter fails on the key)
-    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_option_route
 
-    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--occluder-albedo", "fixed")
-    assert [options["occluder_albedo"] for options in units] == ["fixed", "fixed"]
-
-    seen = estimate_bundle_options(monkeypatch, lambda: estimate.estimate_unit(**units[0]))
-    assert seen["occluder_albedo"] == "fixed"
+    route = estimate_option_route(
+        monkeypatch, tmp_path, ["--occluder-albedo", "fixed"], "occluder_albedo"
+    )
+    assert route["units"] == ["fixed", "fixed"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["fixed", None, "fixed"]  # None: the library's default

@@ -155,23 +155,14 @@ def test_cli_carries_overcast_variants_to_the_estimate(tmp_path, monkeypatch):
     # one bundle: the flag reaches estimate_bundle; several: each unit's options
     # (absent where not given, so that earlier runs keep their keys) and,
     # through estimate_unit, estimate_bundle
-    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_option_route
 
-    from bayesgloss import cli
-
-    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--overcast-variants")
-    assert [u["overcast_variants"] for u in units] == [True, True]
-    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
-    assert all("overcast_variants" not in u for u in plain)
-
-    calls = (
-        lambda: estimate.estimate_unit(**units[0]),
-        lambda: cli.main(["estimate", str(paths[0]), "--quiet"]),
-        lambda: cli.main(["estimate", str(paths[0]), "--quiet", "--overcast-variants"]),
+    route = estimate_option_route(
+        monkeypatch, tmp_path, ["--overcast-variants"], "overcast_variants"
     )
-    seen = [estimate_bundle_options(monkeypatch, call)["overcast_variants"] for call in calls]
-    assert seen == [True, False, True]
+    assert route["units"] == [True, True]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == [True, False, True]
 
 
 def test_tied_overcast_shapes_share_their_weight(monkeypatch):
@@ -256,22 +247,14 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
 
 
 def test_cli_carries_unreliable_loo_to_the_estimate(tmp_path, monkeypatch):
-    from conftest import estimate_bundle_options, make_synthetic_bundle, planned_unit_options
+    from conftest import estimate_option_route
 
-    from bayesgloss import cli
-
-    paths = [make_synthetic_bundle(tmp_path / f"b{i}", seed=i) for i in range(2)]
-    units = planned_unit_options(monkeypatch, paths, tmp_path / "out", "--unreliable-loo", "stack")
-    assert [u["unreliable_loo"] for u in units] == ["stack", "stack"]
-    plain = planned_unit_options(monkeypatch, paths, tmp_path / "out")
-    assert all("unreliable_loo" not in u for u in plain)
-    calls = (
-        lambda: estimate.estimate_unit(**units[0]),
-        lambda: cli.main(["estimate", str(paths[0]), "--quiet"]),
-        lambda: cli.main(["estimate", str(paths[0]), "--quiet", "--unreliable-loo", "stack"]),
+    route = estimate_option_route(
+        monkeypatch, tmp_path, ["--unreliable-loo", "stack"], "unreliable_loo"
     )
-    seen = [estimate_bundle_options(monkeypatch, call)["unreliable_loo"] for call in calls]
-    assert seen == ["stack", "equal", "stack"]  # the default: equal weights
+    assert route["units"] == ["stack", "stack"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["stack", "equal", "stack"]  # the default: equal weights
 
 
 def test_printed_estimate_says_when_the_weights_are_equal(capsys):
