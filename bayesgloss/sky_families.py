@@ -83,6 +83,7 @@ __all__ = [
     "share_within",
     "UNRELIABLE_LOO_SHARE",
     "high_k_share",
+    "loo_unreliable",
     "equal_when_unreliable",
     "stack_flags",
     "loo_stacking_weights",
@@ -179,13 +180,20 @@ def high_k_share(scores: dict) -> float:
     return float(sum(s["weight"] * s["high_k"] / max(s["entries"], 1) for s in scores.values()))
 
 
+def loo_unreliable(share: float) -> bool:
+    """Whether stacking weights of which ``share`` (:func:`high_k_share`)
+    rests on unreliable PSIS-LOO are not to be trusted: above
+    :data:`UNRELIABLE_LOO_SHARE`."""
+    return share > UNRELIABLE_LOO_SHARE
+
+
 def stack_flags(info: dict) -> list[str]:
     """The object's flags from :func:`fit_families`' record: ``sky-family-not-identifiable``
     where the guard gave the families equal weights, ``loo-unreliable`` where
     weights resting on unreliable PSIS-LOO were kept."""
     if info.get("equal_weights"):
         return ["sky-family-not-identifiable"]
-    return ["loo-unreliable"] if info.get("high_k_share", 0.0) > UNRELIABLE_LOO_SHARE else []
+    return ["loo-unreliable"] if loo_unreliable(info.get("high_k_share", 0.0)) else []
 
 
 def equal_when_unreliable(scores: dict) -> dict:
@@ -210,7 +218,7 @@ def equal_when_unreliable(scores: dict) -> dict:
         ``scores`` with, where the guard acts, each fit's ``weight`` 1 / K
         and its stacking weight kept as ``stacking_weight``.
     """
-    if high_k_share(scores) <= UNRELIABLE_LOO_SHARE:
+    if not loo_unreliable(high_k_share(scores)):
         return scores
     equal = 1.0 / len(scores)
     return {n: {**s, "stacking_weight": s["weight"], "weight": equal} for n, s in scores.items()}
@@ -418,13 +426,14 @@ def fit_families(
         {name: float(w) for name, w in zip(names, weights, strict=True)}
     )
     idata.posterior.attrs["sky_family_most_weight"] = best
-    idata.posterior.attrs["sky_family_equal_weights"] = int("stacking_weight" in scores[best])
+    equal = "stacking_weight" in scores[best]  # the guard made the weights equal
+    idata.posterior.attrs["sky_family_equal_weights"] = int(equal)
     seconds = sum(fit[1].seconds for fit in fits.values()) + samples.facets.seconds
     info = {
         "families": families,
         "most_weight": best,
         "high_k_share": share,
-        "equal_weights": "stacking_weight" in scores[best],
+        "equal_weights": equal,
         "seconds": seconds,
     }
     return idata, samples, used, info

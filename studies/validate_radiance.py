@@ -137,10 +137,10 @@ def _overcast_lost(entry: dict | None) -> bool:
 def _loo_reliable(entry: dict | None) -> bool:
     """Whether a default estimate's stack rests on reliable PSIS-LOO (so
     ``unreliable_loo="equal"`` keeps its weights: the same fit, same seed)."""
-    from bayesgloss.sky_families import UNRELIABLE_LOO_SHARE
+    from bayesgloss.sky_families import loo_unreliable
 
     stack = (entry or {}).get("sky_families")
-    return bool(stack) and stack.get("high_k_share", 1.0) <= UNRELIABLE_LOO_SHARE
+    return bool(stack) and not loo_unreliable(stack.get("high_k_share", 1.0))
 
 
 def _faces_ground(b) -> bool:
