@@ -56,6 +56,7 @@ SETS = {
     "validation_holdout4": "validation_holdout4",
     "validation_holdout5": "validation_holdout5",
     "validation_holdout6": "validation_holdout6",
+    "validation_holdout7": "validation_holdout7",
     "mitsuba_set": "validation_mitsuba",
 }
 RESULTS = HERE / "results"
@@ -87,6 +88,7 @@ DEFAULT_METHODS = {
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
+    "validation_holdout7": ("baseline", "fixed", "families"),
 }
 
 
