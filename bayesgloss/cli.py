@@ -252,6 +252,7 @@ def _estimate(args: argparse.Namespace) -> int:
         ground_facing=args.ground_facing,
         overcast_variants=args.overcast_variants,
         unreliable_loo=args.unreliable_loo or "equal",
+        ground_shadow=args.ground_shadow,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -366,6 +367,7 @@ def _estimate_many(args, progress) -> int:
                 **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
                 **({"overcast_variants": True} if args.overcast_variants else {}),
                 **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
+                **({"ground_shadow": args.ground_shadow} if args.ground_shadow else {}),
                 "bundle_content": content,
             },
         )
@@ -530,6 +532,7 @@ def _parser() -> argparse.ArgumentParser:
     from .ground_facing import DEFAULT_GROUND_FACING, GROUND_FACING_MODES, GROUND_FACING_NZ
     from .joint_estimate import DEFAULT_FRESNEL
     from .lobes import LOBE_FAMILIES
+    from .object_shadow import GROUND_SHADOWS
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
     from .render import OCCLUDER_REFLECTANCE
     from .sky_families import OVERCAST_VARIANTS, UNRELIABLE_LOO_SHARE
@@ -676,6 +679,13 @@ def _parser() -> argparse.ArgumentParser:
         "(Pareto k > 0.7, as on objects of 1-3 facets), average the families with equal "
         "weights and flag sky-family-not-identifiable (default 'equal'), or keep the "
         "stacking weights and flag loo-unreliable ('stack'; bayesgloss.sky_families)",
+    )
+    es.add_argument(
+        "--ground-shadow",
+        default=None,
+        choices=GROUND_SHADOWS,
+        help="without an object_mesh: the ground sunlit everywhere (default 'none'), or "
+        "shadowed by the convex object the facets bound ('convex'; bayesgloss.object_shadow)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

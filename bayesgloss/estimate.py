@@ -106,6 +106,7 @@ from .joint_estimate import (
 )
 from .lobes import check_lobe_family
 from .model_error import model_error_sd, with_model_error
+from .object_shadow import DEFAULT_GROUND_SHADOW, check_ground_shadow
 from .occluder_albedo import (
     DEFAULT_OCCLUDER_ALBEDO,
     check_occluder_albedo_mode,
@@ -235,6 +236,7 @@ def estimate_bundle(
     ground_facing: str | None = None,
     overcast_variants: bool = False,
     unreliable_loo: str = "equal",
+    ground_shadow: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -301,6 +303,11 @@ def estimate_bundle(
         ``sky-family-not-identifiable``;
         :func:`bayesgloss.sky_families.equal_when_unreliable`), or kept
         (flagged ``loo-unreliable``).
+    ground_shadow : {"none", "convex"}, optional
+        Without an ``object_mesh`` (per-frame illumination only): the
+        ground sunlit everywhere, or the shadow of the convex object its
+        facets bound (:mod:`bayesgloss.object_shadow`); default
+        :data:`bayesgloss.object_shadow.DEFAULT_GROUND_SHADOW`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -337,8 +344,12 @@ def estimate_bundle(
             f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
             "pixel response); the fixed-brightness estimator has the Phong lobe only"
         )
+    shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
+    if shadow != DEFAULT_GROUND_SHADOW and not joint:
+        raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")
     if joint:
         sampler_options["fresnel"] = fresnel
+        sampler_options["ground_shadow"] = shadow
         if lobe != "families":
             sampler_options["lobe_family"] = lobe
     if occluder_albedo is None:  # the lobe families' stack keeps the faces at one albedo
@@ -573,6 +584,7 @@ def estimate_unit(
     ground_facing: str | None = None,
     overcast_variants: bool = False,
     unreliable_loo: str = "equal",
+    ground_shadow: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -583,7 +595,8 @@ def estimate_unit(
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
     changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
-    ``ground_facing``, ``overcast_variants`` and ``unreliable_loo``: as :func:`estimate_bundle`'s
+    ``ground_facing``, ``overcast_variants``, ``unreliable_loo`` and
+    ``ground_shadow``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -608,5 +621,6 @@ def estimate_unit(
         ground_facing=ground_facing,
         overcast_variants=overcast_variants,
         unreliable_loo=unreliable_loo,
+        ground_shadow=ground_shadow,
     )
     return result_files(res)

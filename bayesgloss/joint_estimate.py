@@ -21,6 +21,12 @@ from .fresnel import FRESNEL_COLUMNS
 from .intervals import posterior_quantiles
 from .irradiance import measured_sky
 from .lobes import check_lobe_family, roughness_of_exponent
+from .object_shadow import (
+    DEFAULT_GROUND_SHADOW,
+    averaged_bases,
+    check_ground_shadow,
+    shadow_points,
+)
 from .visibility import bundle_occlusion
 
 __all__ = [
@@ -84,6 +90,7 @@ def joint_inputs(
     fresnel="none",
     lobe_family=DEFAULT_LOBE_FAMILY,
     occluder_albedo=None,
+    ground_shadow=DEFAULT_GROUND_SHADOW,
 ):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` and the frames any of them sees with the sun
@@ -91,7 +98,9 @@ def joint_inputs(
     the glossy lobe's family ``lobe_family`` (:data:`bayesgloss.lobes.LOBE_FAMILIES`)
     and, for a bundle with an ``object_mesh``, its faces' albedo
     ``occluder_albedo`` (default :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`;
-    :mod:`bayesgloss.occluder_albedo`): (data, frames used (T,) of bool, sky
+    :mod:`bayesgloss.occluder_albedo`), and for one without, the object's
+    shadow on the ground where ``ground_shadow`` is ``"convex"``
+    (:mod:`bayesgloss.object_shadow`): (data, frames used (T,) of bool, sky
     model names)."""
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
@@ -106,6 +115,9 @@ def joint_inputs(
         if occluder_albedo is not None:  # the map is the same: only its faces' albedo changes
             occlusion = occlusion.replace(occluder_reflectance=float(occluder_albedo))
         mesh["occlusion"] = occlusion
+    owner = None
+    if check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane":
+        geometry, owner = shadow_points(b.facets, b.camera_position)
     bases = il.illumination_bases(
         geometry,
         day,
@@ -115,7 +127,10 @@ def joint_inputs(
         ground=ground,
         ground_reflectance=rho,
         **mesh,
-    ).take(keep, used)
+    )
+    if owner is not None:  # points over each facet, averaged
+        bases = averaged_bases(bases, owner, len(b.facets.normal))
+    bases = bases.take(keep, used)
     exposure = None
     if b.exposure is not None:
         exposure = b.exposure[used]
@@ -141,8 +156,9 @@ def joint_fit(
     fresnel = options.pop("fresnel", DEFAULT_FRESNEL)
     family = check_lobe_family(options.pop("lobe_family", DEFAULT_LOBE_FAMILY))
     albedo = options.pop("occluder_albedo", None)
+    shadow = options.pop("ground_shadow", DEFAULT_GROUND_SHADOW)
     data, used, names = joint_inputs(
-        b, y, usable, censored, keep, illumination, fresnel, family, albedo
+        b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow
     )
     if "max_steps" in options:  # a sweep of the joint sampler is its step
         options.setdefault("max_sweeps", options.pop("max_steps"))
@@ -206,6 +222,7 @@ def joint_fit(
     )
     idata.posterior.attrs["fresnel"] = fresnel
     idata.posterior.attrs["lobe_family"] = family
+    idata.posterior.attrs["ground_shadow"] = shadow
     if albedo is not None:
         idata.posterior.attrs["occluder_albedo"] = float(albedo)
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)

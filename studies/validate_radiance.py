@@ -65,7 +65,7 @@ RESULTS = HERE / "results"
 QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
-    "loo-equal", "fresnel", "schlick", "lobes",
+    "loo-equal", "fresnel", "schlick", "lobes", "shadow",
 )  # fmt: skip
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
@@ -81,6 +81,8 @@ ESTIMATES = {
     "fresnel": {"per_frame": True, "illumination": "families", "fresnel": "radiance"},
     "schlick": {"per_frame": True, "illumination": "families", "fresnel": "schlick"},
     "lobes": {"per_frame": True, "illumination": "families", "lobe": "families"},
+    # the default with the convex object's shadow on the ground (bayesgloss.object_shadow)
+    "shadow": {"per_frame": True, "illumination": "families", "ground_shadow": "convex"},
 }
 #: Methods scored by default on a set that has none cached (``--methods``).
 DEFAULT_METHODS = {
@@ -88,7 +90,7 @@ DEFAULT_METHODS = {
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
-    "validation_holdout7": ("baseline", "fixed", "families"),
+    "validation_holdout7": ("baseline", "fixed", "families", "shadow"),
 }
 
 
