@@ -371,7 +371,13 @@ def estimate_bundle(
     if stacked is not None:
         fit, what, key = stacked
         data = (b, curves, y, usable, censored, keep, illumination, seed, sampler_options)
-        idata, samples, used, info = fit(*data, progress, jobs)
+        idata, samples, used, info = fit(
+            *data,
+            progress,
+            jobs,
+            overcast_variants=overcast_variants,
+            unreliable_loo=unreliable_loo,
+        )
         families = info.pop("sky_families", None)
         part = key, info[key]
         run = {
@@ -433,6 +439,8 @@ def estimate_bundle(
         out.summary["object"]["flags"] += sky_families.stack_flags(families)
     if part is not None:  # each choice's weight, LOO and own gloss
         out.summary[part[0]] = part[1]
+        if not info["stacked"]:  # the sky not identified: the default choice alone
+            out.summary["object"]["flags"].append(f"{what.replace(' ', '-')}-not-stacked")
     return out
 
 

@@ -32,7 +32,18 @@ __all__ = ["fit_lobe_families"]
 
 
 def fit_lobe_families(
-    b, curves, y, usable, censored, keep, illumination, seed, options, progress=None, jobs=1
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    seed,
+    options,
+    progress=None,
+    jobs=1,
+    **sky_options,
 ):
     """The joint model under each lobe family, stacked (module docstring).
 
@@ -49,6 +60,9 @@ def fit_lobe_families(
         Called with (fits done, fits).
     jobs : int
         Fits at once in worker processes.
+    **sky_options
+        ``overcast_variants`` and ``unreliable_loo`` of
+        :func:`bayesgloss.stacking.fit_stacked`.
 
     Returns
     -------
@@ -83,11 +97,12 @@ def fit_lobe_families(
         attribute="lobe_family",
         progress=progress,
         jobs=jobs,
+        **sky_options,
     )
     # the families' microfacet roughness differ in meaning; the mixture keeps none
     stack.idata.posterior = stack.idata.posterior.drop_vars("roughness_object", errors="ignore")
     families = stack.entries()
-    for n in (n for n in LOBE_FAMILIES if n != "phong"):  # microfacet families only
+    for n in (n for n in LOBE_FAMILIES if n != "phong" and n in stack.own):  # microfacet ones
         families[n]["roughness"] = _quantiles(
             roughness_of_exponent(stack.own[n]["n_object"].values)
         )

@@ -73,7 +73,18 @@ def check_occluder_albedo_mode(mode: str) -> str:
 
 
 def fit_occluder_albedos(
-    b, curves, y, usable, censored, keep, illumination, seed, options, progress=None, jobs=1
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    seed,
+    options,
+    progress=None,
+    jobs=1,
+    **sky_options,
 ):
     """The joint model with the mesh's faces at each of :data:`OCCLUDER_ALBEDOS`, stacked.
 
@@ -90,6 +101,9 @@ def fit_occluder_albedos(
         Called with (fits done, fits).
     jobs : int
         Fits at once in worker processes.
+    **sky_options
+        ``overcast_variants`` and ``unreliable_loo`` of
+        :func:`bayesgloss.stacking.fit_stacked`.
 
     Returns
     -------
@@ -123,6 +137,7 @@ def fit_occluder_albedos(
         attribute="occluder_albedo",
         progress=progress,
         jobs=jobs,
+        **sky_options,
     )
     info = stack.record("occluder_albedos", stack.entries(), "occluder_albedo", choices[stack.best])
     return stack.idata, stack.samples, stack.used, info

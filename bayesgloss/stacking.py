@@ -19,6 +19,15 @@ fitted under the most-weighted sky family, so a part of k choices costs
 k - 1 fits more than the sky alone (not k times as many); with a named sky
 (or ``"auto"``) every choice is fitted under it. The default choice's
 component of the mixture keeps the sky mixture's draws.
+
+Where the sky families were given equal weights because their PSIS-LOO is
+unreliable (:func:`bayesgloss.sky_families.equal_when_unreliable`: the
+day's sky is not identified), the other choices are not fitted: fitted
+under one sky, a winning choice's posterior would drop the sky's
+uncertainty the equal mixture carries (stop 35: a box's answer narrowed to
+one sky's fit while flagged ``sky-family-not-identifiable``). The answer is
+then the default choice's sky mixture, and the record says the part was
+not stacked.
 """
 
 from __future__ import annotations
@@ -95,8 +104,11 @@ class StackedFits:
 
     def record(self, key: str, entries: dict, best_key: str, best) -> dict:
         """The wrappers' ``info``: ``entries`` under ``key``, the most-weighted
-        choice under ``best_key``, ``seconds``, and ``sky_families`` where stacked."""
+        choice under ``best_key``, ``seconds``, ``stacked`` (False where the
+        sky was not identified and the default choice was fitted alone), and
+        ``sky_families`` where stacked."""
         info = {key: entries, best_key: best, "seconds": self.seconds}
+        info["stacked"] = len(self.own) > 1
         if self.sky is not None:
             info["sky_families"] = self.sky
         return info
@@ -140,6 +152,8 @@ def fit_stacked(
     attribute,
     progress=None,
     jobs=1,
+    overcast_variants=False,
+    unreliable_loo="equal",
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
 
@@ -165,6 +179,8 @@ def fit_stacked(
         Called with (fits done, fits) for the fits under the chosen sky.
     jobs : int
         Fits at once in worker processes.
+    overcast_variants, unreliable_loo
+        As :func:`bayesgloss.sky_families.fit_families`' (the sky's stack).
     """
     args = (b, curves, y, usable, censored, keep)
     options = {k: v for k, v in options.items() if k != option}
@@ -175,10 +191,20 @@ def fit_stacked(
 
     seconds, sky_info = 0.0, None
     if illumination == "families":
-        first = sky_families.fit_families(*args, seed, opts(default), None, jobs)
+        first = sky_families.fit_families(
+            *args,
+            seed,
+            opts(default),
+            None,
+            jobs,
+            overcast_variants=overcast_variants,
+            unreliable_loo=unreliable_loo,
+        )
         sky_info = first[3]
         seconds += sky_info.pop("seconds")
         others = {label: opts(label) for label in labels if label != default}
+        if sky_info.get("equal_weights"):  # the sky not identified: the default alone
+            labels, others = [default], {}
         fits = {default: first[:3]}
         fits.update(_fit_each(args, sky_info["most_weight"], seed, options, others, progress, jobs))
     else:
@@ -207,4 +233,5 @@ def fit_stacked(
         {label: float(w) for label, w in zip(labels, weights, strict=True)}
     )
     idata.posterior.attrs[f"{attribute}_most_weight"] = best
+    idata.posterior.attrs[f"{attribute}_stacked"] = int(len(labels) > 1)
     return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds)
