@@ -5,7 +5,8 @@ A second renderer beside :mod:`bayesgloss.sequences` (Radiance): the same
 camera, sky, ground, image size, camera response) with a Mitsuba material
 (:class:`MitsubaMaterial`): smooth ``plastic``, GGX ``roughplastic``, and a
 smooth ``conductor`` or GGX ``roughconductor`` blended with a Lambertian base
-through ``blendbsdf``, so that a metal's gloss can be below 1. The config's
+through ``blendbsdf``, so that a metal's gloss can be below 1 (but see
+"Known limit" below). The config's
 own Radiance material fields (``material``, ``colour``, ``specularity``,
 ``roughness``) and ``ambient`` are not used.
 
@@ -38,6 +39,19 @@ The frames then go through :func:`bayesgloss.sequences.camera_response` and
 :func:`bayesgloss.bundle.write_bundle` exactly as the Radiance renderer's do
 (labels from :func:`~bayesgloss.sequences.label_image`, exposure written for
 ``linear-radiance`` only), into ``cache_dir/<name>-<hash>/``.
+
+Known limit
+-----------
+Mitsuba 3.9.1's ``blendbsdf`` weights a sample of a delta lobe (the smooth
+``conductor``) by the blend's mixture density, (1 - w) p_diffuse + w, not by
+w (its sampling fix of mitsuba3 PR #1681, right for two non-delta lobes):
+a plane of ``blendbsdf`` (w 0.1, diffuse 0.5, ideal mirror) under a uniform
+sky of radiance 1 renders a specular part of 0.028-0.053 for 0.1 and a
+diffuse part 9-31 % high (stop 35's diagnosis, 256 spp). So the smooth
+metals' frames hold less gloss than :func:`true_gloss` (which reads the
+BSDF's ``sample`` per component, a path without the fault) says; on the
+Mitsuba set's smooth metals the difference is 0.005-0.02 in gamma. The
+rough conductors (no delta lobe) and the plastics are not affected.
 
 True gloss
 ----------
