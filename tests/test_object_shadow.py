@@ -126,3 +126,50 @@ def test_a_mirror_wall_with_the_sun_behind_it_sees_the_box_shadow_like_rtrace():
     assert err["points"] < 0.06, err
     assert err["none"] > 0.3, err
     assert err["points"] < err["centre"], err
+
+
+def test_ground_shadow_reaches_the_estimate_and_its_units(tmp_path, monkeypatch):
+    # --ground-shadow must reach each unit's options (absent where not given:
+    # earlier runs keep their keys) and, through estimate_unit, estimate_bundle
+    from conftest import estimate_option_route
+
+    route = estimate_option_route(
+        monkeypatch, tmp_path, ["--ground-shadow", "convex"], "ground_shadow"
+    )
+    assert route["units"] == ["convex", "convex"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["convex", None, "convex"]  # None: the library's default
+
+
+def test_ground_shadow_needs_per_frame_illumination(tmp_path):
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import estimate
+
+    path = make_synthetic_bundle(tmp_path / "b", seed=2)
+    with pytest.raises(ValueError, match="ground shadow 'convex' needs per-frame illumination"):
+        estimate.estimate_bundle(path, per_frame=False, ground_shadow="convex")
+    with pytest.raises(ValueError, match="unknown ground shadow 'mesh'"):
+        estimate.estimate_bundle(path, ground_shadow="mesh")
+
+
+def test_joint_inputs_cast_the_shadow_only_where_asked(tmp_path):
+    # the same bundle's joint data with and without the shadow: the same
+    # shapes; a facet's diffuse basis is the same at every point of it but
+    # for the shadow, which only ever darkens (it takes the sun's share out
+    # of the ground it falls on); and it changes some facets' bases
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import bundle, joint_estimate
+    from bayesgloss.estimate import bundle_curves, observations
+
+    b = bundle.read_bundle(make_synthetic_bundle(tmp_path / "b", seed=2))
+    y, usable, censored = observations(bundle_curves(b))
+    keep = usable.sum(axis=1) >= 4
+    args = (b, y, usable, censored, keep, "gensky-clear")
+    plain, used, _ = joint_estimate.joint_inputs(*args, ground_shadow="none")
+    shadow, used2, _ = joint_estimate.joint_inputs(*args, ground_shadow="convex")
+    assert np.array_equal(used, used2) and plain.diffuse.shape == shadow.diffuse.shape
+    sky_part = slice(1, None)  # the sky's and ground's parts (the sun's direct part is the facet's)
+    assert np.all(shadow.diffuse[sky_part] <= plain.diffuse[sky_part] * (1 + 1e-9))
+    assert np.any(np.abs(shadow.diffuse - plain.diffuse) > 1e-3 * np.abs(plain.diffuse).max())
