@@ -226,24 +226,14 @@ def ground_shadow(points, sun_direction, occluder) -> np.ndarray:
     p = np.asarray(points, dtype=float)
     sun = np.atleast_2d(np.asarray(sun_direction, dtype=float))
     v = np.asarray(occluder, dtype=float)
-    flat = p.reshape(-1, 2)
-    out = np.zeros((len(flat), len(sun)), dtype=bool)
-    hulls, lo, hi = {}, np.full(2, np.inf), np.full(2, -np.inf)
+    out = np.zeros(p.shape[:-1] + (len(sun),), dtype=bool)
     for t, s in enumerate(sun):
         if s[2] <= 1e-6:
             continue
         proj = v[:, :2] - (v[:, 2:3] / s[2]) * s[:2]  # along -s down to z = 0
-        hulls[t] = ConvexHull(proj).equations  # a x + b y + c <= 0 inside
-        lo, hi = np.minimum(lo, proj.min(axis=0)), np.maximum(hi, proj.max(axis=0))
-    if hulls:
-        # only points within the shadows' bounding box can be in one (the same
-        # answer; most ground points a facet's directions reach are far away)
-        pad = 1e-9 * max(float(np.max(hi - lo)), 1.0)
-        near = np.flatnonzero(np.all((flat >= lo - pad) & (flat <= hi + pad), axis=1))
-        q = flat[near]
-        for t, eq in hulls.items():
-            out[near, t] = np.max(q @ eq[:, :2].T + eq[:, 2], axis=-1) <= 0
-    return out.reshape(p.shape[:-1] + (len(sun),))
+        eq = ConvexHull(proj).equations  # a x + b y + c <= 0 inside
+        out[..., t] = np.max(p @ eq[:, :2].T + eq[:, 2], axis=-1) <= 0
+    return out
 
 
 def _ground_points(center, directions):
