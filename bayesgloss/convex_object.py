@@ -32,7 +32,7 @@ points, which fixes it where the walls' lines are parallel or absent.
 
 Each seen facet's polygon is the intersection's face in its plane;
 :func:`facet_points` spreads points over it so that the forward model's
-bases can be averaged over the facet (:mod:`bayesgloss.ground_shadow`): a
+bases can be averaged over the facet (:mod:`bayesgloss.object_shadow`): a
 wall's mirror footprint on the ground crosses the shadow's edge during the
 day, which its centre alone does not see.
 """

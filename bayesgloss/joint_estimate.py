@@ -117,7 +117,8 @@ def joint_inputs(
         mesh["occlusion"] = occlusion
     owner = None
     if check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane":
-        geometry, owner = shadow_points(b.facets, b.camera_position)
+        # points over the kept facets only; the object is bounded by all of them
+        geometry, owner = shadow_points(b.facets, b.camera_position, which=keep)
     bases = il.illumination_bases(
         geometry,
         day,
@@ -128,9 +129,10 @@ def joint_inputs(
         ground_reflectance=rho,
         **mesh,
     )
-    if owner is not None:  # points over each facet, averaged
-        bases = averaged_bases(bases, owner, len(b.facets.normal))
-    bases = bases.take(keep, used)
+    if owner is None:
+        bases = bases.take(keep, used)
+    else:  # points over each kept facet, averaged
+        bases = averaged_bases(bases, owner, int(np.count_nonzero(keep))).take(frames=used)
     exposure = None
     if b.exposure is not None:
         exposure = b.exposure[used]

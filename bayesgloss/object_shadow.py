@@ -45,8 +45,8 @@ def check_ground_shadow(mode: str) -> str:
     return mode
 
 
-def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE):
-    """Points over each facet, as a geometry that casts the object's shadow.
+def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE, which=None):
+    """Points over facets, as a geometry that casts the object's shadow.
 
     Parameters
     ----------
@@ -56,6 +56,9 @@ def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE):
         [m]
     per_side : int
         :func:`bayesgloss.convex_object.facet_points`' grid.
+    which : array_like of bool (F,), optional
+        The facets to spread points over (default all): the object is
+        bounded by every facet whether or not its bases are wanted.
 
     Returns
     -------
@@ -63,20 +66,22 @@ def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE):
         M points: each its facet's normal, its own view direction, the
         object's vertices as the occluder.
     owner : ndarray of int (M,)
-        The facet (index into ``facets``) of each point.
+        The facet of each point, counted among ``which``'s.
     """
     normal = np.asarray(facets.normal, dtype=float)
     center = np.asarray(facets.center, dtype=float)
     obj = convex_object(normal, center)
+    chosen = np.flatnonzero(np.ones(len(normal), bool) if which is None else which)
     points, owner = [], []
-    for f, (poly, n) in enumerate(zip(obj.polygons, normal, strict=True)):
+    for k, f in enumerate(chosen):
+        poly, n = obj.polygons[f], normal[f]
         pts = facet_points(poly, n, per_side) if len(poly) else center[f][None, :]
         points.append(pts)
-        owner.append(np.full(len(pts), f))
+        owner.append(np.full(len(pts), k))
     points = np.concatenate(points)
     owner = np.concatenate(owner)
     view = render.view_directions(points, camera_position)
-    geometry = render.ViewGeometry(normal[owner], view, points, obj.vertices)
+    geometry = render.ViewGeometry(normal[chosen][owner], view, points, obj.vertices)
     return geometry, owner
 
 

@@ -28,6 +28,14 @@ def test_shadow_points_lie_on_their_facets_and_cast_the_box():
         np.testing.assert_allclose(geom.normal[owner == f], seen.normal[f][None].repeat(16, 0))
     np.testing.assert_allclose(np.linalg.norm(geom.view_direction, axis=1), 1.0)
     assert len(geom.occluder) == 8  # the whole box, its unseen walls included
+    # points over a subset of the facets: the same points, the object still the whole box
+    which = np.array([False, True, True])
+    sub, sub_owner = shadow_points(seen, CAMERA, per_side=4, which=which)
+    picked = np.isin(owner, [1, 2])
+    np.testing.assert_array_equal(sub.center, geom.center[picked])
+    np.testing.assert_array_equal(sub_owner, owner[picked] - 1)
+    np.testing.assert_array_equal(sub.normal, geom.normal[picked])
+    np.testing.assert_array_equal(sub.occluder, geom.occluder)
     with pytest.raises(ValueError, match="unknown ground shadow 'mesh'"):
         check_ground_shadow("mesh")
 
