@@ -90,9 +90,7 @@ def sbc_object(ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int 
     y = il.simulate(th.transpose(1, 0, 2)[:, :, None, :], lam[:, None], ref, rng)[0, :, 0]
     data = dataclasses.replace(ref, y=y)
     e, w = 2, 12
-    res = sample_material(
-        data, n_ensembles=e, n_walkers=w, min_sweeps=800, max_sweeps=max_sweeps, seed=index
-    )
+    res = sample_material(data, n_ensembles=e, n_walkers=w, max_sweeps=max_sweeps, seed=index)
     gamma = res.draws[0, ..., 0]  # (E, W m), each walker's draws one after another
     draws = (gamma.ravel(), res.material[..., 1].ravel(), res.frames[..., t // 2, 1].ravel())
     truth = (th[0, 0, 0], hyper[0, 1], lam[0, t // 2, 1])

@@ -62,8 +62,12 @@ THIN = 4
 FRESNEL_PARAMETERS = ("fresnel_strength", "log_normal_albedo")
 #: Collective moves per sweep (directions adapted during burn-in).
 COLLECTIVE = 4
-#: Burn-in sweeps, in rounds between which the collective directions are adapted.
-BURN_ROUNDS = (200, 200, 200)
+#: Burn-in sweeps, in rounds between which the collective directions are adapted
+#: (rounds of 200 until stop 36: on the benchmark bundle of
+#: ``studies/bench_joint.py`` the object's interval was the same with 100,
+#: and a run's sweeps 700-1100 against 1400; the one-material SBC was run
+#: again with it, ``tests/test_material.py``).
+BURN_ROUNDS = (100, 100, 100)
 
 
 @dataclass
@@ -502,6 +506,7 @@ def sample_joint(
     draws_per_ensemble: int = 1000,
     seed: int | None = 0,
     progress=None,
+    burn_rounds: tuple[int, ...] = BURN_ROUNDS,
 ) -> JointSamples:
     """Sample the joint posterior of facets and per-frame illumination.
 
@@ -521,6 +526,9 @@ def sample_joint(
     seed : int or None
     progress : callable, optional
         Called with (sweeps done, max_sweeps) after each chunk.
+    burn_rounds : tuple of int
+        Burn-in sweeps before the production run, in rounds between which
+        the collective directions are adapted (:data:`BURN_ROUNDS`).
 
     Returns
     -------
@@ -537,6 +545,7 @@ def sample_joint(
         draws_per_ensemble=draws_per_ensemble,
         seed=seed,
         progress=progress,
+        burn_rounds=burn_rounds,
     )
 
 
@@ -553,6 +562,7 @@ def run_chain(
     seed: int | None,
     progress,
     diagnosed_facets: int | None = None,
+    burn_rounds: tuple[int, ...] = BURN_ROUNDS,
 ) -> JointSamples:
     """Run a chain of ``chain_class`` (:class:`_JointChain` or a subclass):
     burn-in (adapting the collective directions), then sweeps in chunks
@@ -565,7 +575,7 @@ def run_chain(
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     chain = chain_class(data, n_ensembles, n_walkers, rng)
-    for length in BURN_ROUNDS:
+    for length in burn_rounds:
         states = []
         for _ in range(length):
             chain.sweep()
