@@ -63,11 +63,11 @@ FRESNEL_PARAMETERS = ("fresnel_strength", "log_normal_albedo")
 #: Collective moves per sweep (directions adapted during burn-in).
 COLLECTIVE = 4
 #: Burn-in sweeps, in rounds between which the collective directions are adapted
-#: (rounds of 200 until stop 36: on the benchmark bundle of
-#: ``studies/bench_joint.py`` the object's interval was the same with 100,
-#: and a run's sweeps 700-1100 against 1400; the one-material SBC was run
-#: again with it, ``tests/test_material.py``).
-BURN_ROUNDS = (100, 100, 100)
+#: (rounds of 100 with a check of the rule from 400 sweeps gave the same
+#: interval 1.32 times faster on ``studies/bench_joint.py``'s bundle with
+#: ``--sky auto``, and passed the one-material SBC, stop 36; not yet the
+#: default: ``studies/README.md``).
+BURN_ROUNDS = (200, 200, 200)
 
 
 @dataclass
@@ -597,7 +597,11 @@ def run_chain(
                     hyper_kept.append(chain.hyper.copy())
         if progress:
             progress(chain.sweeps - burn, max_sweeps)
-        if chain.sweeps - burn >= min_sweeps:
+        # the rule is checked once the kept half can give every run the same
+        # number of draws (the stacks mix fits draw by draw, so a fit that
+        # stopped early with fewer draws could not be mixed with the others)
+        enough = len(th_kept) - len(th_kept) // 2 >= draws_per_ensemble // n_walkers
+        if chain.sweeps - burn >= min_sweeps and enough:
             half = len(th_kept) // 2
             diag = _diagnosed(
                 np.stack([x[:, pick] for x in th_kept[half:]]), np.stack(lam_kept[half:])
