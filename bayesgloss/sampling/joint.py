@@ -63,10 +63,7 @@ FRESNEL_PARAMETERS = ("fresnel_strength", "log_normal_albedo")
 #: Collective moves per sweep (directions adapted during burn-in).
 COLLECTIVE = 4
 #: Burn-in sweeps, in rounds between which the collective directions are adapted
-#: (rounds of 100 with a check of the rule from 400 sweeps gave the same
-#: interval 1.32 times faster on ``studies/bench_joint.py``'s bundle with
-#: ``--sky auto``, and passed the one-material SBC, stop 36; not yet the
-#: default: ``studies/README.md``).
+#: (a shorter schedule is measured in ``studies/README.md``, stop 36).
 BURN_ROUNDS = (200, 200, 200)
 
 
@@ -506,7 +503,6 @@ def sample_joint(
     draws_per_ensemble: int = 1000,
     seed: int | None = 0,
     progress=None,
-    burn_rounds: tuple[int, ...] = BURN_ROUNDS,
 ) -> JointSamples:
     """Sample the joint posterior of facets and per-frame illumination.
 
@@ -526,10 +522,6 @@ def sample_joint(
     seed : int or None
     progress : callable, optional
         Called with (sweeps done, max_sweeps) after each chunk.
-    burn_rounds : tuple of int
-        Burn-in sweeps before the production run, in rounds between which
-        the collective directions are adapted (:data:`BURN_ROUNDS`).
-
     Returns
     -------
     JointSamples
@@ -545,7 +537,6 @@ def sample_joint(
         draws_per_ensemble=draws_per_ensemble,
         seed=seed,
         progress=progress,
-        burn_rounds=burn_rounds,
     )
 
 
@@ -597,9 +588,7 @@ def run_chain(
                     hyper_kept.append(chain.hyper.copy())
         if progress:
             progress(chain.sweeps - burn, max_sweeps)
-        # the rule is checked once the kept half can give every run the same
-        # number of draws (the stacks mix fits draw by draw, so a fit that
-        # stopped early with fewer draws could not be mixed with the others)
+        # every fit keeps the same number of draws: the stacks mix them draw by draw
         enough = len(th_kept) - len(th_kept) // 2 >= draws_per_ensemble // n_walkers
         if chain.sweeps - burn >= min_sweeps and enough:
             half = len(th_kept) // 2

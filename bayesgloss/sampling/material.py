@@ -479,7 +479,8 @@ def sample_material(
     rule is checked every ``chunk`` sweeps from ``min_sweeps`` on (on the
     benchmark bundle it held at 400-600 sweeps: a shorter schedule is
     measured in ``studies/README.md``, stop 36, not yet the default; the
-    SBC of ``tests/test_material.py`` runs with these defaults).
+    SBC of ``tests/test_material.py`` runs with these defaults);
+    ``burn_rounds`` the burn-in's rounds (:data:`~.joint.BURN_ROUNDS`).
 
     Returns
     -------
