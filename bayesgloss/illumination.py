@@ -579,12 +579,17 @@ def _log_softmax_norm(v) -> np.ndarray:
     return _logsumexp_finite([np.zeros_like(v[..., 0])] + [v[..., k] for k in range(v.shape[-1])])
 
 
+def _log_softmax_after_zero(v) -> np.ndarray:
+    """The log softmax of (0, v_1, ..., v_(K-1)), (..., K), for v (..., K - 1) finite."""
+    u = np.concatenate([np.zeros_like(v[..., :1]), v], axis=-1)
+    return u - _log_softmax_norm(v)[..., None]
+
+
 def log_sun_weights(hyper) -> np.ndarray:
     """log weights of the sun's clear, dimmed and hidden components for the
     day, (..., 3), from the one-material model's hyper (..., 4): the softmax
     of (0, v_1, v_2), its last two coordinates."""
-    v = np.concatenate([np.zeros_like(hyper[..., :1]), hyper[..., 2:4]], axis=-1)
-    return v - _log_softmax_norm(hyper[..., 2:4])[..., None]
+    return _log_softmax_after_zero(hyper[..., 2:4])
 
 
 def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=False) -> np.ndarray:
@@ -629,8 +634,7 @@ def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=Fals
 def log_shape_weights(lam) -> np.ndarray:
     """log w_tk of the sky models, (..., K) for lam (..., 3 + K - 1): the
     softmax of (0, u_1, ..., u_(K-1))."""
-    u = np.concatenate([np.zeros_like(lam[..., :1]), lam[..., 3:]], axis=-1)
-    return u - _log_softmax_norm(lam[..., 3:])[..., None]
+    return _log_softmax_after_zero(lam[..., 3:])
 
 
 def latent_names(data: JointData) -> tuple[str, ...]:

@@ -165,8 +165,10 @@ def joint_fit(
     if "max_steps" in options:  # a sweep of the joint sampler is its step
         options.setdefault("max_sweeps", options.pop("max_steps"))
     options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
-    allowed = {"max_sweeps", "min_sweeps", "chunk", "burn_rounds", "n_walkers", "n_ensembles"}
-    allowed.add("draws_per_ensemble")
+    allowed = {
+        *("max_sweeps", "min_sweeps", "chunk", "burn_rounds"),
+        *("n_walkers", "n_ensembles", "draws_per_ensemble"),
+    }
     samples = sampling.sample_material(
         data,
         seed=seed,

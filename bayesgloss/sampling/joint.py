@@ -522,6 +522,7 @@ def sample_joint(
     seed : int or None
     progress : callable, optional
         Called with (sweeps done, max_sweeps) after each chunk.
+
     Returns
     -------
     JointSamples
