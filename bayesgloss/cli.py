@@ -298,6 +298,8 @@ def _print_estimate(name, summary) -> None:
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
         kind = "equal weight" if stack.get("equal_weights") else "stacking weight"
         print(f"sky families ({kind}): {weights}")
+        if stack.get("stopped_early"):
+            print(f"  kept at their first check, far behind: {', '.join(stack['stopped_early'])}")
         if "high_k_share" in stack:
             print(
                 f"  {stack['high_k_share']:.0%} of the entries' PSIS-LOO unreliable "

@@ -313,7 +313,11 @@ def estimate_bundle(
     sampler_options : dict, optional
         More keyword arguments for :func:`~bayesgloss.sampling.sample_posterior`
         (``max_steps``...); for the joint sampler ``max_steps`` caps its
-        sweeps (default :data:`JOINT_MAX_SWEEPS`).
+        sweeps (default :data:`JOINT_MAX_SWEEPS`), ``burn_rounds``,
+        ``chunk`` and ``min_sweeps`` set its schedule
+        (:func:`~bayesgloss.sampling.sample_material`), and with the sky
+        families ``screen_families=False`` runs every family in full
+        (:func:`~bayesgloss.sky_families.fit_families`).
 
     Raises
     ------

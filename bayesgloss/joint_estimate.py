@@ -143,7 +143,18 @@ def joint_inputs(
 
 
 def joint_fit(
-    b, curves, y, usable, censored, keep, illumination, seed, options, progress=None, facets=True
+    b,
+    curves,
+    y,
+    usable,
+    censored,
+    keep,
+    illumination,
+    seed,
+    options,
+    progress=None,
+    facets=True,
+    resume=None,
 ):
     """The joint model of facets and per-frame illumination
     (:mod:`bayesgloss.illumination`) on the usable facets and the frames
@@ -151,7 +162,9 @@ def joint_fit(
 
     ``facets=False`` leaves out each facet's own posterior given the
     object's illumination (:func:`add_facet_posteriors` adds it later: the
-    stacked sky families need it of one fit only).
+    stacked sky families need it of one fit only). ``resume``: the samples
+    of a fit with the same arguments stopped at its cap unconverged, run on
+    to ``options``' cap (:func:`bayesgloss.sampling.schedule.run_chain`).
     """
     az = arviz()
     options = dict(options or {})
@@ -173,6 +186,7 @@ def joint_fit(
         data,
         seed=seed,
         progress=progress,
+        resume=None if resume is None else resume.run,
         **{k: v for k, v in options.items() if k in allowed},
     )
     rng = np.random.default_rng(seed)

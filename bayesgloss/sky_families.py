@@ -57,6 +57,18 @@ drawn) the reported interval held the truth in 11 of 12 against 9, no
 confident miss against 3, MAE 0.139 against 0.166, at a median width of
 0.63 against 0.27 (studies/README.md).
 
+Families that do not fit the day are not run to convergence (stop 37):
+every family is first run to the sampler's first check of its stopping
+rule (:func:`bayesgloss.sampling.first_check`); a fit that has not
+converged there and whose elpd_loo is :data:`SCREEN_NATS` nats and
+:data:`SCREEN_DSE` standard errors behind the best is kept as it is
+(``stopped_early``), and the others run on from where they stopped, so
+their draws are those of one uninterrupted run. Such a fit gets a stacking
+weight near 0 converged or not (stop 36: gensky's overcast and
+intermediate skies on a clear day, 0.0002 and 0.0004, had run to the
+sampler's cap unconverged, and set the default's time). Where the weights
+would be made equal (below), nothing is kept early.
+
 Entries of a facet's curve are not independent given the model (its
 errors are correlated in time), so LOO differences overstate how sure the
 choice is; where two families are close the weights say so and the
@@ -70,9 +82,10 @@ from concurrent.futures import as_completed
 
 import numpy as np
 
+from . import sampling
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
-from .joint_estimate import AUTO_SKIES, add_facet_posteriors, joint_fit
+from .joint_estimate import AUTO_SKIES, JOINT_MAX_SWEEPS, add_facet_posteriors, joint_fit
 from .loo import loo_table
 from .pool import process_pool
 
@@ -89,6 +102,7 @@ __all__ = [
     "loo_stacking_weights",
     "mixture_draws",
     "mix_posteriors",
+    "far_behind",
     "fit_families",
 ]
 
@@ -124,6 +138,21 @@ OVERCAST_VARIANTS = ("cie-3", "gensky-uniform")
 #: before holdout 6 was drawn (studies/README.md).
 UNRELIABLE_LOO_SHARE = 0.1
 
+#: How far behind a sky family's fit must be, at its first check of the
+#: stopping rule and not converged there, to be kept as it is instead of run
+#: on (:func:`far_behind`): elpd_loo more than this many nats below the best
+#: fit's, and more than :data:`SCREEN_DSE` standard errors of the difference.
+#: Stop 36 found the default's time set by the families that do not fit the
+#: day: on the benchmark's clear day gensky's overcast and intermediate fits
+#: ran to the sampler's cap, unconverged, for stacking weights of 0.0002 and
+#: 0.0004. A fit that far behind gets a stacking weight near 0 converged or
+#: not; one stopped early is recorded as such (``stopped_early``).
+SCREEN_NATS = 50.0
+SCREEN_DSE = 5.0
+#: ... and a stacking weight there below this (stacking can weigh a fit
+#: that is worse in total where it predicts some entries better).
+SCREEN_WEIGHT = 0.01
+
 #: The overcast shapes as one group: their stacking weight's total shared by
 #: pseudo-BMA+ (:func:`share_within`).
 OVERCAST_GROUP = ("gensky-overcast", *OVERCAST_VARIANTS)
@@ -156,7 +185,7 @@ def loo_stacking_weights(idatas: dict) -> dict:
     """
     terms = {name: _pointwise(idata) for name, idata in idatas.items()}
     rows = loo_table(terms)["table"]
-    kept = ("weight", "elpd_loo", "se", "p_loo")
+    kept = ("weight", "elpd_loo", "se", "p_loo", "elpd_diff", "dse")
     return {
         r["model"]: {
             **{k: r[k] for k in kept},
@@ -321,14 +350,17 @@ def share_within(scores: dict, idatas: dict, seed: int | None = None) -> dict:
     return out
 
 
-def _fit_each(names, args, seed, options, progress, jobs) -> dict:
+def _fit_each(names, args, seed, options, progress, jobs, resume=None) -> dict:
     """:func:`~bayesgloss.joint_estimate.joint_fit` of each sky family of
-    ``names`` (without the facets' own posteriors), on ``jobs`` processes."""
-    fits = {}
+    ``names`` (without the facets' own posteriors), on ``jobs`` processes;
+    ``resume``: family to the samples of its fit to run on."""
+    fits, resume = {}, resume or {}
     if jobs > 1:
         with process_pool(min(jobs, len(names))) as pool:
             futures = {
-                pool.submit(joint_fit, *args, name, seed, options, facets=False): name
+                pool.submit(
+                    joint_fit, *args, name, seed, options, facets=False, resume=resume.get(name)
+                ): name
                 for name in names
             }
             for done, future in enumerate(as_completed(futures), 1):
@@ -343,8 +375,79 @@ def _fit_each(names, args, seed, options, progress, jobs) -> dict:
                 def step(done, total, k=k):
                     progress(k * total + done, len(names) * total)
 
-            fits[name] = joint_fit(*args, name, seed, options, step, facets=False)
+            fits[name] = joint_fit(
+                *args, name, seed, options, step, facets=False, resume=resume.get(name)
+            )
     return {name: fits[name] for name in names}  # in the order of names
+
+
+def far_behind(scores: dict, converged: dict) -> list[str]:
+    """The fits to keep as they are at their first check of the stopping
+    rule: not converged there, their elpd_loo more than :data:`SCREEN_NATS`
+    nats and :data:`SCREEN_DSE` standard errors of the difference below the
+    best fit's, and their stacking weight below :data:`SCREEN_WEIGHT`.
+
+    Parameters
+    ----------
+    scores : dict
+        :func:`loo_stacking_weights` of the fits at their first check
+        (``elpd_diff`` and ``dse`` relative to the best, ``weight``).
+    converged : dict of str to bool
+        Whether each fit met the stopping rule at its first check.
+    """
+    return [
+        name
+        for name, s in scores.items()
+        if not converged[name]
+        and s["elpd_diff"] > max(SCREEN_NATS, SCREEN_DSE * s["dse"])
+        and s["weight"] < SCREEN_WEIGHT
+    ]
+
+
+def _fit_screened(names, args, seed, options, progress, jobs, unreliable_loo):
+    """:func:`_fit_each` with the families far behind kept at their first
+    check of the stopping rule (:func:`far_behind`): every family run to its
+    first check (a run that converged there is the full run's, draw for
+    draw), scored, and the rest not far behind run on from where they
+    stopped (the same chain, sweep for sweep). Nothing is kept early where the stacking
+    weights would be made equal (``unreliable_loo="equal"`` and
+    :func:`loo_unreliable`): each fit would then weigh as much as any.
+    ``options["screen_families"] = False`` runs every family in full.
+
+    Returns
+    -------
+    fits : dict
+        As :func:`_fit_each`'s.
+    stopped : list of str
+        The families kept at their first check.
+    """
+    options = dict(options or {})
+    first = sampling.first_check(**options)
+    full = options.get("max_sweeps", options.get("max_steps", JOINT_MAX_SWEEPS))
+    if not options.pop("screen_families", True) or first >= full:
+        return _fit_each(names, args, seed, options, progress, jobs), []
+    fits = _fit_each(names, args, seed, {**options, "max_sweeps": first}, progress, jobs)
+    stopped = []
+    scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+    if unreliable_loo != "equal" or not loo_unreliable(high_k_share(scores)):
+        stopped = far_behind(scores, {name: fit[1].converged for name, fit in fits.items()})
+    on = [name for name in names if not fits[name][1].converged and name not in stopped]
+    if on:
+        fits |= _run_on(on, fits, args, seed, options, progress, jobs)
+    if stopped and unreliable_loo == "equal":  # the full fits' weights may be made equal
+        scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+        if loo_unreliable(high_k_share(scores)):
+            fits |= _run_on(stopped, fits, args, seed, options, progress, jobs)
+            stopped = []
+    for _, samples, _ in fits.values():
+        samples.run = None  # the chains' states are not needed any more
+    return {name: fits[name] for name in names}, stopped
+
+
+def _run_on(names, fits, args, seed, options, progress, jobs) -> dict:
+    """The fits of ``names`` run on from where they stopped to ``options``' cap."""
+    resume = {name: fits[name][1] for name in names}
+    return _fit_each(names, args, seed, options, progress, jobs, resume)
 
 
 def fit_families(
@@ -374,7 +477,10 @@ def fit_families(
     gives every fit the same weight where the stacking weights rest on
     unreliable PSIS-LOO (:func:`equal_when_unreliable`); ``"stack"`` keeps
     them whatever the Pareto k. Either way the record says how much they
-    rest on (``high_k_share``).
+    rest on (``high_k_share``). Every family is first run to its first
+    check of the stopping rule; those far behind there are kept as they are
+    (:func:`far_behind`, :func:`_fit_screened`; ``options["screen_families"]
+    = False`` runs all in full).
 
     Returns
     -------
@@ -390,7 +496,9 @@ def fit_families(
         The frames used.
     families : dict
         ``families``: per family fitted, :func:`loo_stacking_weights`'s
-        entries and the quantiles of its own ``gamma``; ``most_weight``:
+        entries, the quantiles of its own ``gamma``, whether it
+        ``converged`` and whether it was ``stopped_early``;
+        ``stopped_early``: those families; ``most_weight``:
         the family of most stacking weight; ``high_k_share``;
         ``equal_weights``: whether the guard gave the fits equal weights;
         ``seconds`` of all fits.
@@ -398,7 +506,8 @@ def fit_families(
     if unreliable_loo not in ("stack", "equal"):
         raise ValueError(f"unreliable_loo must be 'stack' or 'equal', not {unreliable_loo!r}")
     args = (b, curves, y, usable, censored, keep)
-    fits = _fit_each(FAMILIES, args, seed, options, progress, jobs)
+    fits, stopped = _fit_screened(FAMILIES, args, seed, options, progress, jobs, unreliable_loo)
+    options = {k: v for k, v in (options or {}).items() if k != "screen_families"}
     scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
     if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) == "gensky-overcast":
         fits |= _fit_each(OVERCAST_VARIANTS, args, seed, options, progress, jobs)
@@ -417,6 +526,8 @@ def fit_families(
         name: {
             **scores[name],
             "gamma": _quantiles(fits[name][0].posterior["gamma_object"].values, GAMMA_BOUNDS),
+            "converged": bool(fits[name][1].converged),
+            "stopped_early": name in stopped,
         }
         for name in names
     }
@@ -431,6 +542,7 @@ def fit_families(
     seconds = sum(fit[1].seconds for fit in fits.values()) + samples.facets.seconds
     info = {
         "families": families,
+        "stopped_early": stopped,
         "most_weight": best,
         "high_k_share": share,
         "equal_weights": equal,

@@ -14,15 +14,16 @@ one process, the fixed model's batched sampler is given the same one core;
 are wall-clock seconds, sweeps, and whether the run met the convergence
 rule, with the ratios of the medians measured in this run.
 
-With ``--shorter`` the default and ``--sky auto`` are timed again with a
-shorter sampler schedule (burn-in rounds of 100 sweeps, the rule checked
-every 100 sweeps from 400 on; :data:`SHORTER`), interleaved with the
-default's (rounds of 200, every 200 from 800). With ``--lobes`` the
+With ``--before`` the default and ``--sky auto`` are timed again as stop
+36 ran them (:data:`BEFORE`: burn-in rounds of 200 sweeps, the rule
+checked every 200 sweeps from 800 on, every sky family run in full),
+interleaved with today's (rounds of 100, every 100 from 400 on, families
+far behind at their first check kept there). With ``--lobes`` the
 default estimate is timed again with ``--lobe families``
 (:mod:`bayesgloss.lobe_families`: two fits more, the Ward and GGX lobes
 under the most-weighted sky family).
 
-Usage: python studies/bench_joint.py [--repeats 3] [--jobs 1] [--max-sweeps N] [--shorter] [--lobes]
+Usage: python studies/bench_joint.py [--repeats 3] [--jobs 1] [--max-sweeps N] [--before] [--lobes]
 """
 
 from __future__ import annotations
@@ -56,23 +57,29 @@ def bench_config():
     )
 
 
-#: A shorter schedule of the one-material sampler (sampler options; stop 36).
-SHORTER = {"burn_rounds": (100, 100, 100), "min_sweeps": 400, "chunk": 100}
+#: Stop 36's schedule of the one-material sampler, every sky family run in
+#: full (sampler options).
+BEFORE = {
+    "burn_rounds": (200, 200, 200),
+    "min_sweeps": 800,
+    "chunk": 200,
+    "screen_families": False,
+}
 
 
-def variants(shorter: bool, lobes: bool) -> list[tuple[str, dict]]:
+def variants(before: bool, lobes: bool) -> list[tuple[str, dict]]:
     """(label, estimate_bundle's keywords) of each timed estimate."""
     out = [("fixed", {"per_frame": False, "illumination": "gensky-clear"})]
     for label, sky in (("auto", "auto"), ("default", None)):
         out.append((label, {"illumination": sky}))
-        if shorter:
-            out.append((f"{label}, shorter schedule", {"illumination": sky, "options": SHORTER}))
+        if before:
+            out.append((f"{label}, stop 36", {"illumination": sky, "options": BEFORE}))
     if lobes:
         out.append(("default, lobe families", {"lobe": "families"}))
     return out
 
 
-def run(repeats: int, max_sweeps: int, lobes: bool = False, shorter=False, jobs=1) -> dict:
+def run(repeats: int, max_sweeps: int, lobes: bool = False, before=False, jobs=1) -> dict:
     """Time each variant ``repeats`` times, seeds in turn; the rows and their medians."""
     from bayesgloss import bundle, estimate, sequences
 
@@ -81,7 +88,7 @@ def run(repeats: int, max_sweeps: int, lobes: bool = False, shorter=False, jobs=
     b = bundle.read_bundle(path)
     rows = []
     for seed in range(repeats):  # interleaved, so that a slow spell hits every variant
-        for label, kw in variants(shorter, lobes):
+        for label, kw in variants(before, lobes):
             kw = dict(kw)
             options = dict(kw.pop("options", {}))
             if max_sweeps:
@@ -105,6 +112,7 @@ def run(repeats: int, max_sweeps: int, lobes: bool = False, shorter=False, jobs=
                     "frames": int(b.sun_up.sum()),
                     "gamma": obj["gamma"]["median"],
                     "hdi90": obj["gamma"]["hdi90"],
+                    "stopped_early": res.summary.get("sky_families", {}).get("stopped_early"),
                 }
             )
             print(json.dumps(rows[-1]))
@@ -120,7 +128,7 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument(
-        "--shorter", action="store_true", help="also time a shorter sampler schedule (SHORTER)"
+        "--before", action="store_true", help="also time stop 36's schedule, no screen (BEFORE)"
     )
     ap.add_argument(
         "--lobes", action="store_true", help="also time --lobe families (bayesgloss.lobe_families)"
@@ -129,16 +137,16 @@ def main(argv=None) -> None:
         "--max-sweeps", type=int, default=None, help="default: estimate's (2000 sweeps, 8000 steps)"
     )
     args = ap.parse_args(argv)
-    out = run(args.repeats, args.max_sweeps, args.lobes, args.shorter, args.jobs)
+    out = run(args.repeats, args.max_sweeps, args.lobes, args.before, args.jobs)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench_joint.json").write_text(json.dumps(out, indent=1))
     med = out["median_seconds"]
     print("median seconds:", json.dumps(med))
     for label, seconds in med.items():
         print(f"{label} / fixed: {seconds / med['fixed']:.1f}x")
-        short = med.get(f"{label}, shorter schedule")
-        if short is not None:
-            print(f"{label}: default schedule / shorter: {seconds / short:.2f}x")
+        old = med.get(f"{label}, stop 36")
+        if old is not None:
+            print(f"{label}: stop 36 / today: {old / seconds:.2f}x")
 
 
 if __name__ == "__main__":

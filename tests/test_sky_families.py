@@ -101,30 +101,96 @@ def test_stacking_weights_of_two_complementary_models():
     np.testing.assert_allclose(w, [0.5, 0.5, 0.0], atol=1e-3)
 
 
-def _fake_family_fits(monkeypatch, log_density: dict, spread: dict | None = None):
+def _fake_family_fits(
+    monkeypatch, log_density: dict, spread: dict | None = None, unconverged=(), log=None
+):
     """joint_fit replaced by fits whose every entry has the log density
     ``log_density[name]`` (default -6), spread over the draws with sd
     ``spread[name]`` (default 0.05: every Pareto k low; a constant log
     density gets k = inf from arviz), the same standard normal pattern in
-    every fit (their differences exact): which families were fitted, in order."""
+    every fit (their differences exact): which families were fitted, in
+    order. The families of ``unconverged`` stop unconverged at their first
+    check; run on (``resume``), they converge. ``log``: a list to which each
+    call's (name, max_sweeps, resumed) is added."""
     import arviz as az
 
     calls = []
 
     def fake_fit(b, curves, y, usable, censored, keep, name, seed, options, *rest, **kw):
         calls.append(name)
+        if log is not None:
+            log.append((name, options.get("max_sweeps"), kw.get("resume") is not None))
         ll = np.full((2, 50, 3, 4), log_density.get(name, -6.0))
         z = np.random.default_rng(11).standard_normal(ll.shape)
         ll = ll + (spread or {}).get(name, 0.05) * z
         gamma = np.full((2, 50), 0.1 * len(calls))  # each fit its own answer
         posterior = {"gamma_object": gamma, "n_object": np.ones((2, 50))}
         idata = az.from_dict(posterior=posterior, log_likelihood={"y": ll})
-        samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+        converged = name not in unconverged or kw.get("resume") is not None
+        samples = SimpleNamespace(
+            seconds=1.0, facets=SimpleNamespace(seconds=0.0), converged=converged, run=None
+        )
         return idata, samples, np.ones(4, bool)
 
     monkeypatch.setattr(sky_families, "joint_fit", fake_fit)
     monkeypatch.setattr(sky_families, "add_facet_posteriors", lambda *args: None)
     return calls
+
+
+def test_far_behind_takes_only_unconverged_fits_far_behind():
+    # 50 nats and 5 standard errors of the difference, a stacking weight
+    # below 0.01, unconverged: a fit that converged is never cut short, a
+    # close or uncertain gap or a weight that counts is run on
+    scores = {
+        "best": {"elpd_diff": 0.0, "dse": 0.0, "weight": 0.95},
+        "far": {"elpd_diff": 60.0, "dse": 5.0, "weight": 0.001},
+        "far, converged": {"elpd_diff": 600.0, "dse": 5.0, "weight": 0.0},
+        "close": {"elpd_diff": 40.0, "dse": 1.0, "weight": 0.0},
+        "uncertain": {"elpd_diff": 60.0, "dse": 20.0, "weight": 0.0},
+        "weighed": {"elpd_diff": 60.0, "dse": 5.0, "weight": 0.049},
+    }
+    converged = dict.fromkeys(scores, False) | {"far, converged": True}
+    assert sky_families.far_behind(scores, converged) == ["far"]
+
+
+def test_families_far_behind_are_kept_at_their_first_check(monkeypatch):
+    # gensky's clear sky predicts best; the overcast sky is 14 nats an entry
+    # (168 nats) behind, the intermediate sky 1 nat an entry (12) behind;
+    # auto, intermediate and overcast do not converge at their first check.
+    # Every family is first run to the first check (500 sweeps after burn-in
+    # by default); the overcast fit is kept there, auto and the intermediate
+    # sky are run on from where they stopped, the clear sky is done
+    from bayesgloss.sampling import first_check
+
+    args = (None,) * 6 + (0, {})
+    unconverged = ("auto", "gensky-intermediate", "gensky-overcast")
+    densities = {"gensky-clear": -5.0, "gensky-overcast": -19.0}
+    log = []
+    _fake_family_fits(monkeypatch, densities, unconverged=unconverged, log=log)
+    _, _, _, fam = sky_families.fit_families(*args)
+    first = first_check()
+    assert log[:4] == [(name, first, False) for name in sky_families.FAMILIES]
+    assert sorted(log[4:]) == [("auto", None, True), ("gensky-intermediate", None, True)]
+    assert fam["stopped_early"] == ["gensky-overcast"]
+    assert fam["families"]["gensky-overcast"]["stopped_early"]
+    assert not fam["families"]["gensky-overcast"]["converged"]
+    assert fam["families"]["gensky-clear"]["weight"] > 0.99
+
+    # screen_families=False: every family run in full, once
+    log.clear()
+    _fake_family_fits(monkeypatch, densities, unconverged=unconverged, log=log)
+    _, _, _, fam = sky_families.fit_families(*args[:-1], {"screen_families": False})
+    assert log == [(name, None, False) for name in sky_families.FAMILIES]
+    assert fam["stopped_early"] == []
+
+    # weights that rest on unreliable PSIS-LOO are made equal: nothing is
+    # kept early (a fit kept there would weigh a quarter)
+    log.clear()
+    spread = dict.fromkeys(sky_families.FAMILIES, 5.0)
+    _fake_family_fits(monkeypatch, densities, spread, unconverged=unconverged, log=log)
+    _, _, _, fam = sky_families.fit_families(*args)
+    assert fam["stopped_early"] == [] and fam["equal_weights"]
+    assert sorted(n for n, _, resumed in log if resumed) == sorted(unconverged)
 
 
 def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypatch):

@@ -44,13 +44,14 @@ from .coordinates import RIDGE_MAX_RMS, RidgeCoordinates
 from .ensemble import BatchedEnsemble
 from .joint import JointSamples, sample_joint
 from .jumps import ExponentJump
-from .material import facets_given_frames, sample_material
+from .material import facets_given_frames, first_check, sample_material
 from .moves import DEFAULT_MOVES, FACET_MOVES, PLAIN_JUMP
 from .posterior import PosteriorSamples, sample_posterior
 from .starts import initial_ensemble
 from .streams import FIRST_CHECK_TAUS, FacetStream
 
 __all__ = [
+    "first_check",
     "BatchedEnsemble",
     "sample_material",
     "facets_given_frames",

@@ -74,7 +74,6 @@ import numpy as np
 
 from .. import diagnostics
 from .. import illumination as il
-from .joint import JointSamples
 from .material_density import (
     dispersed_starts,
     hidden_step,
@@ -82,6 +81,7 @@ from .material_density import (
     log_density_and_gradient,
     natural,
 )
+from .schedule import JointSamples
 
 __all__ = ["sample_material_hmc"]
 

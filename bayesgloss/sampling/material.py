@@ -61,19 +61,23 @@ from scipy import special
 
 from .. import fresnel as fr
 from .. import illumination as il
-from .joint import (
-    BURN_ROUNDS,
-    JointSamples,
-    _curve_data_at,
-    _JointChain,
-    run_chain,
-    starting_frames,
-)
+from .joint import _curve_data_at, _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .posterior import sample_posterior
+from .schedule import THIN, JointSamples, run_chain
 from .starts import _reflect
 
-__all__ = ["sample_material", "starting_material", "facets_given_frames"]
+__all__ = ["sample_material", "first_check", "starting_material", "facets_given_frames"]
+
+#: The one-material sampler's schedule (stop 37): burn-in rounds of 100
+#: sweeps, then the stopping rule checked every 100 sweeps from 400 on. The
+#: rule and the cap are the joint sampler's, so a run stops earlier only where
+#: the rule already holds: on the benchmark bundle it held at 400-600 sweeps
+#: after burn-in, where the old schedule (rounds of 200, every 200 from 800)
+#: ran on to 800 (``studies/README.md``, "The sampler's schedule and speed").
+MATERIAL_BURN_ROUNDS = (100, 100, 100)
+MATERIAL_CHUNK = 100
+MATERIAL_MIN_SWEEPS = 400
 
 
 class _MaterialChain(_JointChain):
@@ -465,22 +469,25 @@ def sample_material(
     *,
     n_ensembles: int = 4,
     n_walkers: int = 16,
-    chunk: int = 200,
-    min_sweeps: int = 800,
+    chunk: int = MATERIAL_CHUNK,
+    min_sweeps: int = MATERIAL_MIN_SWEEPS,
     max_sweeps: int = 8000,
     draws_per_ensemble: int = 1000,
     seed: int | None = 0,
     progress=None,
-    burn_rounds: tuple[int, ...] = BURN_ROUNDS,
+    burn_rounds: tuple[int, ...] = MATERIAL_BURN_ROUNDS,
+    resume=None,
 ) -> JointSamples:
     """Sample the one-material model (module docstring).
 
     Parameters as :func:`bayesgloss.sampling.sample_joint`; the stopping
-    rule is checked every ``chunk`` sweeps from ``min_sweeps`` on (on the
-    benchmark bundle it held at 400-600 sweeps: a shorter schedule is
-    measured in ``studies/README.md``, stop 36, not yet the default; the
-    SBC of ``tests/test_material.py`` runs with these defaults);
-    ``burn_rounds`` the burn-in's rounds (:data:`~.joint.BURN_ROUNDS`).
+    rule is checked every ``chunk`` sweeps from ``min_sweeps`` on, once the
+    kept half holds ``draws_per_ensemble`` draws (:data:`MATERIAL_CHUNK`,
+    :data:`MATERIAL_MIN_SWEEPS`; the SBC of ``tests/test_material.py`` runs
+    with these defaults); ``burn_rounds`` the burn-in's rounds
+    (:data:`MATERIAL_BURN_ROUNDS`); ``resume`` a run stopped at its cap
+    (:attr:`JointSamples.run`) to run on to ``max_sweeps``
+    (:func:`~bayesgloss.sampling.schedule.run_chain`).
 
     Returns
     -------
@@ -502,7 +509,31 @@ def sample_material(
         progress=progress,
         diagnosed_facets=1,
         burn_rounds=burn_rounds,
+        resume=resume,
     )
+
+
+def first_check(
+    *,
+    chunk: int = MATERIAL_CHUNK,
+    min_sweeps: int = MATERIAL_MIN_SWEEPS,
+    burn_rounds: tuple[int, ...] = MATERIAL_BURN_ROUNDS,
+    draws_per_ensemble: int = 1000,
+    n_walkers: int = 16,
+    **_,
+) -> int:
+    """The sweeps after burn-in at which :func:`sample_material` with these
+    options first checks its stopping rule (every ``chunk`` sweeps from
+    ``min_sweeps`` on, once the kept half holds ``draws_per_ensemble``
+    draws; other options ignored). A run capped there stops where an
+    uncapped one would have checked, with the same chain and draws."""
+    burn, needed = sum(burn_rounds), draws_per_ensemble // n_walkers
+    sweeps = chunk
+    while True:
+        kept = (burn + sweeps) // THIN - burn // THIN
+        if sweeps >= min_sweeps and kept - kept // 2 >= needed:
+            return sweeps
+        sweeps += chunk
 
 
 def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: int = 0, **options):
