@@ -142,6 +142,13 @@ def joint_inputs(
     return data, used, names
 
 
+def joint_max_sweeps(options: dict) -> int:
+    """The joint sampler's cap of sweeps after burn-in for sampler options:
+    ``max_sweeps``, else ``max_steps`` (a sweep of the joint sampler is its
+    step), else :data:`JOINT_MAX_SWEEPS`."""
+    return options.get("max_sweeps", options.get("max_steps", JOINT_MAX_SWEEPS))
+
+
 def joint_fit(
     b,
     curves,
@@ -175,9 +182,8 @@ def joint_fit(
     data, used, names = joint_inputs(
         b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow
     )
-    if "max_steps" in options:  # a sweep of the joint sampler is its step
-        options.setdefault("max_sweeps", options.pop("max_steps"))
-    options.setdefault("max_sweeps", JOINT_MAX_SWEEPS)
+    options["max_sweeps"] = joint_max_sweeps(options)
+    options.pop("max_steps", None)
     allowed = {
         *("max_sweeps", "min_sweeps", "chunk", "burn_rounds"),
         *("n_walkers", "n_ensembles", "draws_per_ensemble"),

@@ -85,7 +85,7 @@ import numpy as np
 from . import sampling
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
-from .joint_estimate import AUTO_SKIES, JOINT_MAX_SWEEPS, add_facet_posteriors, joint_fit
+from .joint_estimate import AUTO_SKIES, add_facet_posteriors, joint_fit, joint_max_sweeps
 from .loo import loo_table
 from .pool import process_pool
 
@@ -420,12 +420,13 @@ def _fit_screened(names, args, seed, options, progress, jobs, unreliable_loo):
         As :func:`_fit_each`'s.
     stopped : list of str
         The families kept at their first check.
+    scores : dict or None
+        :func:`loo_stacking_weights` of ``fits`` where computed already.
     """
     options = dict(options or {})
     first = sampling.first_check(**options)
-    full = options.get("max_sweeps", options.get("max_steps", JOINT_MAX_SWEEPS))
-    if not options.pop("screen_families", True) or first >= full:
-        return _fit_each(names, args, seed, options, progress, jobs), []
+    if not options.pop("screen_families", True) or first >= joint_max_sweeps(options):
+        return _fit_each(names, args, seed, options, progress, jobs), [], None
     fits = _fit_each(names, args, seed, {**options, "max_sweeps": first}, progress, jobs)
     stopped = []
     scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
@@ -434,14 +435,15 @@ def _fit_screened(names, args, seed, options, progress, jobs, unreliable_loo):
     on = [name for name in names if not fits[name][1].converged and name not in stopped]
     if on:
         fits |= _run_on(on, fits, args, seed, options, progress, jobs)
+        scores = None
     if stopped and unreliable_loo == "equal":  # the full fits' weights may be made equal
-        scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+        scores = scores or loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
         if loo_unreliable(high_k_share(scores)):
             fits |= _run_on(stopped, fits, args, seed, options, progress, jobs)
-            stopped = []
+            stopped, scores = [], None
     for _, samples, _ in fits.values():
         samples.run = None  # the chains' states are not needed any more
-    return {name: fits[name] for name in names}, stopped
+    return {name: fits[name] for name in names}, stopped, scores
 
 
 def _run_on(names, fits, args, seed, options, progress, jobs) -> dict:
@@ -506,9 +508,10 @@ def fit_families(
     if unreliable_loo not in ("stack", "equal"):
         raise ValueError(f"unreliable_loo must be 'stack' or 'equal', not {unreliable_loo!r}")
     args = (b, curves, y, usable, censored, keep)
-    fits, stopped = _fit_screened(FAMILIES, args, seed, options, progress, jobs, unreliable_loo)
-    options = {k: v for k, v in (options or {}).items() if k != "screen_families"}
-    scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
+    fits, stopped, scores = _fit_screened(
+        FAMILIES, args, seed, options, progress, jobs, unreliable_loo
+    )
+    scores = scores or loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
     if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) == "gensky-overcast":
         fits |= _fit_each(OVERCAST_VARIANTS, args, seed, options, progress, jobs)
         scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})

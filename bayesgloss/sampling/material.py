@@ -61,10 +61,11 @@ from scipy import special
 
 from .. import fresnel as fr
 from .. import illumination as il
+from . import schedule
 from .joint import _curve_data_at, _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .posterior import sample_posterior
-from .schedule import THIN, JointSamples, run_chain
+from .schedule import JointSamples, run_chain
 from .starts import _reflect
 
 __all__ = ["sample_material", "first_check", "starting_material", "facets_given_frames"]
@@ -523,17 +524,15 @@ def first_check(
     **_,
 ) -> int:
     """The sweeps after burn-in at which :func:`sample_material` with these
-    options first checks its stopping rule (every ``chunk`` sweeps from
-    ``min_sweeps`` on, once the kept half holds ``draws_per_ensemble``
-    draws; other options ignored). A run capped there stops where an
-    uncapped one would have checked, with the same chain and draws."""
-    burn, needed = sum(burn_rounds), draws_per_ensemble // n_walkers
-    sweeps = chunk
-    while True:
-        kept = (burn + sweeps) // THIN - burn // THIN
-        if sweeps >= min_sweeps and kept - kept // 2 >= needed:
-            return sweeps
-        sweeps += chunk
+    options first checks its stopping rule (:func:`.schedule.first_check`
+    with this sampler's defaults; other options ignored)."""
+    return schedule.first_check(
+        burn_rounds=burn_rounds,
+        chunk=chunk,
+        min_sweeps=min_sweeps,
+        draws_per_ensemble=draws_per_ensemble,
+        n_walkers=n_walkers,
+    )
 
 
 def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: int = 0, **options):

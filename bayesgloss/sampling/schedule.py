@@ -26,7 +26,7 @@ import numpy as np
 from .. import diagnostics
 from .. import illumination as il
 
-__all__ = ["JointSamples", "ChainRun", "run_chain", "THIN", "BURN_ROUNDS"]
+__all__ = ["JointSamples", "ChainRun", "run_chain", "first_check", "THIN", "BURN_ROUNDS"]
 
 #: Kept chains hold every THIN-th sweep.
 THIN = 4
@@ -110,6 +110,33 @@ def _diagnosed(th_kept, lam_kept):
     return diagnostics.diagnose(np.concatenate([gamma, lat]).astype(float))
 
 
+def _rule_checked(kept: int, sweeps: int, min_sweeps: int, needed: int) -> bool:
+    """Whether a run with ``kept`` states kept ``sweeps`` sweeps after
+    burn-in checks its stopping rule: from ``min_sweeps`` on, once the kept
+    half holds ``needed`` states a walker (every fit keeps the same number of
+    draws: the stacks mix them draw by draw)."""
+    return sweeps >= min_sweeps and kept - kept // 2 >= needed
+
+
+def first_check(
+    *,
+    burn_rounds: tuple[int, ...],
+    chunk: int,
+    min_sweeps: int,
+    draws_per_ensemble: int,
+    n_walkers: int,
+) -> int:
+    """The sweeps after burn-in at which :func:`run_chain` with these
+    arguments first checks its stopping rule. A run capped there stops where
+    an uncapped one would have checked, with the same chain and draws."""
+    burn, sweeps = sum(burn_rounds), chunk
+    while not _rule_checked(
+        (burn + sweeps) // THIN - burn // THIN, sweeps, min_sweeps, draws_per_ensemble // n_walkers
+    ):
+        sweeps += chunk
+    return sweeps
+
+
 def run_chain(
     chain_class,
     data: il.JointData,
@@ -162,9 +189,9 @@ def run_chain(
                     hyper_kept.append(chain.hyper.copy())
         if progress:
             progress(chain.sweeps - burn, max_sweeps)
-        # every fit keeps the same number of draws: the stacks mix them draw by draw
-        enough = len(th_kept) - len(th_kept) // 2 >= draws_per_ensemble // n_walkers
-        if chain.sweeps - burn >= min_sweeps and enough:
+        if _rule_checked(
+            len(th_kept), chain.sweeps - burn, min_sweeps, draws_per_ensemble // n_walkers
+        ):
             half = len(th_kept) // 2
             diag = _diagnosed(
                 np.stack([x[:, pick] for x in th_kept[half:]]), np.stack(lam_kept[half:])
