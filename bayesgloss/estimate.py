@@ -403,7 +403,9 @@ def estimate_bundle(
         }
     elif joint:
         idata, samples, used = joint_fit(
-            b, curves, y, usable, censored, keep, illumination, seed, sampler_options, progress
+            *(b, curves, y, usable, censored, keep, illumination, seed, sampler_options),
+            progress,
+            jobs=jobs,
         )
         run = {
             "seconds": samples.seconds + samples.facets.seconds,

@@ -162,6 +162,7 @@ def joint_fit(
     progress=None,
     facets=True,
     resume=None,
+    jobs=1,
 ):
     """The joint model of facets and per-frame illumination
     (:mod:`bayesgloss.illumination`) on the usable facets and the frames
@@ -172,6 +173,8 @@ def joint_fit(
     stacked sky families need it of one fit only). ``resume``: the samples
     of a fit with the same arguments stopped at its cap unconverged, run on
     to ``options``' cap (:func:`bayesgloss.sampling.schedule.run_chain`).
+    ``jobs``: worker processes for the sampler's groups of ensembles (the
+    draws do not depend on it).
     """
     az = arviz()
     options = dict(options or {})
@@ -193,6 +196,7 @@ def joint_fit(
         seed=seed,
         progress=progress,
         resume=None if resume is None else resume.run,
+        jobs=jobs,
         **{k: v for k, v in options.items() if k in allowed},
     )
     rng = np.random.default_rng(seed)

@@ -352,14 +352,26 @@ def share_within(scores: dict, idatas: dict, seed: int | None = None) -> dict:
 
 def _fit_each(names, args, seed, options, progress, jobs, resume=None) -> dict:
     """:func:`~bayesgloss.joint_estimate.joint_fit` of each sky family of
-    ``names`` (without the facets' own posteriors), on ``jobs`` processes;
-    ``resume``: family to the samples of its fit to run on."""
+    ``names`` (without the facets' own posteriors), on ``jobs`` processes:
+    one family to each while there are more families than processes, the
+    rest given to each family's groups of ensembles (a single family, as
+    the screen often runs on, takes them all); ``resume``: family to the
+    samples of its fit to run on."""
     fits, resume = {}, resume or {}
-    if jobs > 1:
-        with process_pool(min(jobs, len(names))) as pool:
+    outer = min(jobs, len(names))
+    inner = max(1, jobs // len(names))
+    if outer > 1:
+        with process_pool(outer) as pool:
             futures = {
                 pool.submit(
-                    joint_fit, *args, name, seed, options, facets=False, resume=resume.get(name)
+                    joint_fit,
+                    *args,
+                    name,
+                    seed,
+                    options,
+                    facets=False,
+                    resume=resume.get(name),
+                    jobs=inner,
                 ): name
                 for name in names
             }
@@ -376,7 +388,10 @@ def _fit_each(names, args, seed, options, progress, jobs, resume=None) -> dict:
                     progress(k * total + done, len(names) * total)
 
             fits[name] = joint_fit(
-                *args, name, seed, options, step, facets=False, resume=resume.get(name)
+                *(*args, name, seed, options, step),
+                facets=False,
+                resume=resume.get(name),
+                jobs=inner,
             )
     return {name: fits[name] for name in names}  # in the order of names
 

@@ -5,6 +5,7 @@ import numpy as np
 
 from bayesgloss import illumination as il
 from bayesgloss.sampling import first_check, sample_material
+from bayesgloss.sampling.schedule import group_sizes
 
 #: A short schedule on a small problem: 2 ensembles of 8 walkers, 80 draws
 #: per ensemble (10 kept states per walker, so the kept half must hold 20
@@ -55,3 +56,20 @@ def test_a_run_run_on_is_the_longer_run_sweep_for_sweep(paper_three_skies):
     np.testing.assert_array_equal(on.draws, whole.draws)
     np.testing.assert_array_equal(on.frames, whole.frames)
     np.testing.assert_array_equal(on.material, whole.material)
+
+
+def test_groups_run_in_worker_processes_give_the_same_draws(paper_three_skies):
+    # the ensembles run in two groups, each with its own generator spawned
+    # from the seed; run at once in two worker processes they must give the
+    # draws of the same groups run one after the other, bit for bit (the
+    # chains travel to the workers and back between checks)
+    data = _data(paper_three_skies)
+    assert group_sizes(4) == [2, 2] and group_sizes(3) == [2, 1] and group_sizes(1) == [1]
+    one = sample_material(data, seed=3, max_sweeps=80, **SHORT)
+    two = sample_material(data, seed=3, max_sweeps=80, jobs=2, **SHORT)
+    np.testing.assert_array_equal(one.draws, two.draws)
+    np.testing.assert_array_equal(one.frames, two.frames)
+    np.testing.assert_array_equal(one.material, two.material)
+    assert one.acceptance == two.acceptance
+    # and the groups are chains of their own: their draws differ
+    assert not np.array_equal(one.draws[:, 0], one.draws[:, 1])

@@ -438,6 +438,7 @@ def sample_joint(
     draws_per_ensemble: int = 1000,
     seed: int | None = 0,
     progress=None,
+    jobs: int = 1,
 ) -> JointSamples:
     """Sample the joint posterior of facets and per-frame illumination.
 
@@ -457,6 +458,9 @@ def sample_joint(
     seed : int or None
     progress : callable, optional
         Called with (sweeps done, max_sweeps) after each chunk.
+    jobs : int
+        Worker processes for the ensembles' groups
+        (:func:`~bayesgloss.sampling.schedule.run_chain`; the draws do not depend on it).
 
     Returns
     -------
@@ -473,4 +477,5 @@ def sample_joint(
         draws_per_ensemble=draws_per_ensemble,
         seed=seed,
         progress=progress,
+        jobs=jobs,
     )

@@ -478,6 +478,7 @@ def sample_material(
     progress=None,
     burn_rounds: tuple[int, ...] = MATERIAL_BURN_ROUNDS,
     resume=None,
+    jobs: int = 1,
 ) -> JointSamples:
     """Sample the one-material model (module docstring).
 
@@ -488,7 +489,8 @@ def sample_material(
     with these defaults); ``burn_rounds`` the burn-in's rounds
     (:data:`MATERIAL_BURN_ROUNDS`); ``resume`` a run stopped at its cap
     (:attr:`JointSamples.run`) to run on to ``max_sweeps``
-    (:func:`~bayesgloss.sampling.schedule.run_chain`).
+    (:func:`~bayesgloss.sampling.schedule.run_chain`); ``jobs`` worker
+    processes for the ensembles' groups (the draws do not depend on it).
 
     Returns
     -------
@@ -508,6 +510,7 @@ def sample_material(
         draws_per_ensemble=draws_per_ensemble,
         seed=seed,
         progress=progress,
+        jobs=jobs,
         diagnosed_facets=1,
         burn_rounds=burn_rounds,
         resume=resume,

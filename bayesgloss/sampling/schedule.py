@@ -25,13 +25,26 @@ import numpy as np
 
 from .. import diagnostics
 from .. import illumination as il
+from ..pool import process_pool
 
-__all__ = ["JointSamples", "ChainRun", "run_chain", "first_check", "THIN", "BURN_ROUNDS"]
+__all__ = [
+    "JointSamples",
+    "ChainRun",
+    "GroupRun",
+    "run_chain",
+    "group_sizes",
+    "first_check",
+    "THIN",
+    "BURN_ROUNDS",
+]
 
 #: Kept chains hold every THIN-th sweep.
 THIN = 4
 #: Names of the draws' Fresnel columns (:data:`bayesgloss.fresnel.FRESNEL_COLUMNS`).
 FRESNEL_PARAMETERS = ("fresnel_strength", "log_normal_albedo")
+#: The ensembles run in this many groups, each a chain with its own random
+#: generator, so that as many processes can run them at once (:func:`run_chain`).
+GROUPS = 2
 #: Burn-in sweeps, in rounds between which the collective directions are adapted
 #: (the one-material sampler's are shorter: :mod:`.material`).
 BURN_ROUNDS = (200, 200, 200)
@@ -87,16 +100,24 @@ class JointSamples:
 
 
 @dataclass
-class ChainRun:
-    """A chain between chunks: the chain object (its random generator
-    inside), the burn-in's sweeps, the states kept so far and the seconds
-    spent."""
+class GroupRun:
+    """One group of ensembles between chunks: the chain object (its random
+    generator inside), the burn-in's sweeps and the states kept so far."""
 
     chain: object
     burn: int
     th_kept: list = field(default_factory=list)
     lam_kept: list = field(default_factory=list)
     hyper_kept: list = field(default_factory=list)
+
+
+@dataclass
+class ChainRun:
+    """A run between chunks: each group's :class:`GroupRun`, the sweeps done
+    after burn-in and the seconds spent."""
+
+    groups: list
+    sweeps: int = 0
     seconds: float = 0.0
 
 
@@ -118,6 +139,11 @@ def _rule_checked(kept: int, sweeps: int, min_sweeps: int, needed: int) -> bool:
     return sweeps >= min_sweeps and kept - kept // 2 >= needed
 
 
+def _kept(burn: int, sweeps: int) -> int:
+    """States kept (every THIN-th sweep) ``sweeps`` sweeps after a burn-in of ``burn``."""
+    return (burn + sweeps) // THIN - burn // THIN
+
+
 def first_check(
     *,
     burn_rounds: tuple[int, ...],
@@ -131,10 +157,56 @@ def first_check(
     an uncapped one would have checked, with the same chain and draws."""
     burn, sweeps = sum(burn_rounds), chunk
     while not _rule_checked(
-        (burn + sweeps) // THIN - burn // THIN, sweeps, min_sweeps, draws_per_ensemble // n_walkers
+        _kept(burn, sweeps), sweeps, min_sweeps, draws_per_ensemble // n_walkers
     ):
         sweeps += chunk
     return sweeps
+
+
+def group_sizes(n_ensembles: int) -> list[int]:
+    """The ensembles of each of :data:`GROUPS` groups (fewer where there are
+    fewer ensembles), as even as can be."""
+    g = max(1, min(GROUPS, n_ensembles))
+    return [n_ensembles // g + (k < n_ensembles % g) for k in range(g)]
+
+
+def _advance(chain_class, data, group, size, n_walkers, seed, burn_rounds, until) -> GroupRun:
+    """One group's chain run to ``until`` sweeps after burn-in, every THIN-th
+    state kept: from the start (``group`` None: a chain of ``size``
+    ensembles with the generator of ``seed``, a :class:`numpy.random.SeedSequence`,
+    and its burn-in, adapting the collective directions after each round)
+    or from where ``group`` stopped. A function of its arguments alone, so
+    that a worker process can run it (:func:`run_chain`'s ``jobs``)."""
+    if group is None:
+        chain = chain_class(data, size, n_walkers, np.random.default_rng(seed))
+        for length in burn_rounds:
+            states = []
+            for _ in range(length):
+                chain.sweep()
+                if chain.sweeps % THIN == 0:
+                    states.append(chain.state())
+            chain.adapt(np.stack(states[len(states) // 2 :]))
+        group = GroupRun(chain, chain.sweeps)
+    chain = group.chain
+    hyper = getattr(chain, "hyper", None) is not None
+    while chain.sweeps < group.burn + until:
+        chain.sweep()
+        if chain.sweeps % THIN == 0:
+            group.th_kept.append(chain.th.astype(np.float32))
+            group.lam_kept.append(chain.lam.astype(np.float32))
+            if hyper:
+                group.hyper_kept.append(chain.hyper.copy())
+    return group
+
+
+def _kept_half(groups, key: str, pick=slice(None)) -> np.ndarray:
+    """The kept second half of every group's states ``key``, the groups'
+    ensembles side by side: (n, E, ...)."""
+    out = []
+    for g in groups:
+        kept = getattr(g, key)
+        out.append(np.stack([x[:, pick] for x in kept[len(kept) // 2 :]]))
+    return np.concatenate(out, axis=1)
 
 
 def run_chain(
@@ -152,6 +224,7 @@ def run_chain(
     diagnosed_facets: int | None = None,
     burn_rounds: tuple[int, ...] = BURN_ROUNDS,
     resume: ChainRun | None = None,
+    jobs: int = 1,
 ) -> JointSamples:
     """Run a chain of ``chain_class`` (:class:`~.joint._JointChain` or a
     subclass): burn-in (adapting the collective directions), then sweeps in
@@ -160,51 +233,55 @@ def run_chain(
     any). ``diagnosed_facets``: the facets whose gamma the rule checks
     (None: all; 1 where gamma is shared). ``resume``: a run stopped at its
     cap (:attr:`JointSamples.run`), run on to this ``max_sweeps`` (the
-    other arguments must be the first run's)."""
+    other arguments must be the first run's).
+
+    The ensembles run in groups (:func:`group_sizes`), each a chain of its
+    own with its own generator spawned from ``seed``; the rule is checked
+    on all groups' draws together. ``jobs`` > 1 runs the groups at once in
+    worker processes (:func:`bayesgloss.pool.process_pool`) between checks;
+    the draws are the same whatever ``jobs``.
+    """
     if n_walkers < 6 or n_walkers % 2:
         raise ValueError(f"need an even number of walkers >= 6, got {n_walkers}")
     t0 = time.perf_counter()
-    if resume is None:
-        chain = chain_class(data, n_ensembles, n_walkers, np.random.default_rng(seed))
-        for length in burn_rounds:
-            states = []
-            for _ in range(length):
-                chain.sweep()
-                if chain.sweeps % THIN == 0:
-                    states.append(chain.state())
-            chain.adapt(np.stack(states[len(states) // 2 :]))
-        resume = ChainRun(chain, chain.sweeps)
-    chain, burn = resume.chain, resume.burn
-    hyper = getattr(chain, "hyper", None)
-    th_kept, lam_kept, hyper_kept = resume.th_kept, resume.lam_kept, resume.hyper_kept
+    sizes = group_sizes(n_ensembles)
+    seeds = np.random.SeedSequence(seed).spawn(len(sizes))
+    run = resume if resume is not None else ChainRun([None] * len(sizes))
     pick = slice(None) if diagnosed_facets is None else slice(0, diagnosed_facets)
+    needed = draws_per_ensemble // n_walkers
+    burn = sum(burn_rounds) if resume is None else resume.groups[0].burn
     diag = None
-    while chain.sweeps < burn + max_sweeps:
-        for _ in range(chunk):
-            chain.sweep()
-            if chain.sweeps % THIN == 0:
-                th_kept.append(chain.th.astype(np.float32))
-                lam_kept.append(chain.lam.astype(np.float32))
-                if hyper is not None:
-                    hyper_kept.append(chain.hyper.copy())
-        if progress:
-            progress(chain.sweeps - burn, max_sweeps)
-        if _rule_checked(
-            len(th_kept), chain.sweeps - burn, min_sweeps, draws_per_ensemble // n_walkers
-        ):
-            half = len(th_kept) // 2
-            diag = _diagnosed(
-                np.stack([x[:, pick] for x in th_kept[half:]]), np.stack(lam_kept[half:])
-            )
-            if np.all(diag[3]):
-                break
-    half = len(th_kept) // 2
-    th = np.stack(th_kept[half:]).astype(float)  # (n, E, F, W, C): C = 3, or 6 with Fresnel
-    lam = np.stack(lam_kept[half:]).astype(float)  # (n, E, W, T, L)
+    pool = process_pool(min(jobs, len(sizes))) if jobs > 1 and len(sizes) > 1 else None
+    try:
+        while run.sweeps < max_sweeps:
+            until = run.sweeps + chunk
+            args = [  # a group that has started carries its data in its chain
+                (chain_class, None if g else data, g, size, n_walkers, sd, burn_rounds, until)
+                for g, size, sd in zip(run.groups, sizes, seeds, strict=True)
+            ]
+            if pool is None:
+                run.groups = [_advance(*a) for a in args]
+            else:
+                run.groups = list(pool.map(_advance, *zip(*args, strict=True)))
+            run.sweeps = until
+            if progress:
+                progress(run.sweeps, max_sweeps)
+            if _rule_checked(_kept(burn, run.sweeps), run.sweeps, min_sweeps, needed):
+                diag = _diagnosed(
+                    _kept_half(run.groups, "th_kept", pick), _kept_half(run.groups, "lam_kept")
+                )
+                if np.all(diag[3]):
+                    break
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    # (n, E, F, W, C): C = 3, or 6 with Fresnel
+    th = _kept_half(run.groups, "th_kept").astype(float)
+    lam = _kept_half(run.groups, "lam_kept").astype(float)  # (n, E, W, T, L)
     if diag is None:
         diag = _diagnosed(th[:, :, pick], lam)
     n = len(th)
-    keep = np.linspace(0, n - 1, max(1, min(n, draws_per_ensemble // n_walkers))).round()
+    keep = np.linspace(0, n - 1, max(1, min(n, needed))).round()
     keep = keep.astype(int)
     th, lam = th[keep], lam[keep]
     m = len(th)
@@ -212,21 +289,31 @@ def run_chain(
     # (m, E, F, W, C) -> (F, E, W m, C), walkers one after another
     draws3 = th.transpose(2, 1, 3, 0, 4).reshape(f, e, w * m, th.shape[-1])
     frames = lam.transpose(1, 2, 0, 3, 4).reshape(e, w * m, data.shape[1], data.n_latents)
+    chains = [g.chain for g in run.groups]
     material = None
-    if hyper is not None:  # (m, E, W, 2) -> (E, W m, 2)
-        hk = np.stack(hyper_kept[half:])[keep]
+    if getattr(chains[0], "hyper", None) is not None:  # (m, E, W, 2) -> (E, W m, 2)
+        hk = _kept_half(run.groups, "hyper_kept")[keep]
         material = hk.transpose(1, 2, 0, 3).reshape(e, w * m, -1)
-    # log sigma from its conditional at every draw
+    # log sigma from its conditional at every draw, each group's from its own generator
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, C)
-    _, q = il.log_likelihood_sigma_marginal(th_e, frames, data, with_q=True)
-    state = chain.rng.bit_generator.state  # a run run on goes on from the chain's own draws
-    ls = chain._draw_log_sigma(q)  # (E, F, S), the chain's own noise model
-    chain.rng.bit_generator.state = state
+    ls, start = [], 0
+    for chain, size in zip(chains, sizes, strict=True):
+        group = slice(start, start + size)
+        start += size
+        _, q = il.log_likelihood_sigma_marginal(th_e[group], frames[group], data, with_q=True)
+        state = chain.rng.bit_generator.state  # a run run on goes on from the chain's own draws
+        ls.append(chain._draw_log_sigma(q))  # (E, F, S), the chain's own noise model
+        chain.rng.bit_generator.state = state
+    ls = np.concatenate(ls)
     # log sigma in column 3; the Fresnel k and log A (columns 4, 5) after it
     draws = np.concatenate([draws3[..., :3], ls.transpose(1, 0, 2)[..., None], draws3[..., 4:]], -1)
     parameters = JointSamples.parameters + (FRESNEL_PARAMETERS if draws.shape[-1] > 4 else ())
-    sweeps = max(chain.sweeps, 1)
-    resume.seconds += time.perf_counter() - t0
+    sweeps = max(chains[0].sweeps, 1)
+    accepted = {
+        k: sum(c.accepted[k] * size for c, size in zip(chains, sizes, strict=True)) / e / sweeps
+        for k in chains[0].accepted
+    }
+    run.seconds += time.perf_counter() - t0
     return JointSamples(
         draws,
         frames,
@@ -234,10 +321,10 @@ def run_chain(
         diag[1],
         diag[2],
         bool(np.all(diag[3])),
-        chain.sweeps,
-        {k: v / sweeps for k, v in chain.accepted.items()},
-        resume.seconds,
+        chains[0].sweeps,
+        accepted,
+        run.seconds,
         parameters=parameters,
         material=material,
-        run=None if np.all(diag[3]) else resume,
+        run=None if np.all(diag[3]) else run,
     )
