@@ -27,6 +27,7 @@ from .object_shadow import (
     check_ground_shadow,
     shadow_points,
 )
+from .pool import process_pool
 from .visibility import bundle_occlusion
 
 __all__ = [
@@ -261,18 +262,26 @@ def joint_fit(
         b.times[used].tz_convert("UTC").tz_localize(None),
     )
     if facets:
-        add_facet_posteriors(idata, samples, seed)
+        add_facet_posteriors(idata, samples, seed, jobs)
     return idata, samples, used
 
 
-def add_facet_posteriors(idata, samples, seed) -> None:
+def add_facet_posteriors(idata, samples, seed, jobs: int = 1) -> None:
     """Each facet's own posterior given the object's illumination draws
     (:func:`bayesgloss.sampling.facets_given_frames`) into ``idata``'s
     posterior (``gamma``, ``n``, ``s``, ``sigma`` per facet) and its run
-    into ``samples.facets``."""
-    facet_draws, facet_run = sampling.facets_given_frames(
-        samples.data, samples.frames, seed=seed, max_steps=FACETS_GIVEN_FRAMES_STEPS
-    )
+    into ``samples.facets``; ``jobs`` worker processes share the facet
+    sampler's streams (the draws do not depend on it)."""
+    options = {"seed": seed, "max_steps": FACETS_GIVEN_FRAMES_STEPS}
+    if jobs > 1:
+        with process_pool(jobs) as pool:
+            facet_draws, facet_run = sampling.facets_given_frames(
+                samples.data, samples.frames, pool=pool, **options
+            )
+    else:
+        facet_draws, facet_run = sampling.facets_given_frames(
+            samples.data, samples.frames, **options
+        )
     fd = facet_draws.transpose(1, 2, 0, 3)  # (E, S', F, 4)
     values = {"gamma": fd[..., 0], "n": np.exp(fd[..., 1]), "s": np.exp(fd[..., 2])}
     values["sigma"] = np.exp(fd[..., 3])

@@ -539,7 +539,7 @@ def fit_families(
     stacked = [scores[name].get("stacking_weight", scores[name]["weight"]) for name in names]
     best = names[int(np.argmax(stacked))]
     idata, samples, used = fits[best]
-    add_facet_posteriors(idata, samples, seed)  # of the most-weighted family only
+    add_facet_posteriors(idata, samples, seed, jobs)  # of the most-weighted family only
     families = {  # each family's own gloss, before the mixture replaces the chosen one's
         name: {
             **scores[name],

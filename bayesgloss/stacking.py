@@ -129,7 +129,9 @@ def _fit_each(args, illumination, seed, options, choices, progress, jobs):
                     progress(done, len(choices))
     else:
         for label, opts in choices.items():
-            fits[label] = joint_fit(*args, illumination, seed, opts, facets=False)
+            # a single choice takes every process for its groups of ensembles
+            inner = max(1, jobs // len(choices))
+            fits[label] = joint_fit(*args, illumination, seed, opts, facets=False, jobs=inner)
             if progress is not None:
                 progress(len(fits), len(choices))
     return fits
@@ -217,7 +219,7 @@ def fit_stacked(
     best = labels[int(np.argmax(weights))]
     idata, samples, used = fits[best]
     if "gamma" not in idata.posterior:  # facets' own posteriors of the chosen fit only
-        add_facet_posteriors(idata, samples, seed)
+        add_facet_posteriors(idata, samples, seed, jobs)
     for label, fit in fits.items():
         if label != default or sky_info is None:
             seconds += fit[1].seconds

@@ -189,8 +189,9 @@ class _MaterialChain(_JointChain):
         out, (E, H), for theta's :func:`~bayesgloss.illumination.unit_parts` ``parts``."""
         lp = il.log_prior_material(th, hyper, self.data)
         ll = il.log_likelihood_shared_sigma(th, lam, self.data, parts)
-        lp = lp + self._frame_prior(lam, hyper=hyper).sum(-1)
-        return np.where(np.isfinite(lp), lp + ll, -np.inf)
+        frames = self._frame_prior(lam, hyper=hyper).sum(-1)
+        # summed as :meth:`_full_density` sums: the same number for the same state
+        return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
 
     def _shared_step(self) -> tuple:
         """The ensemble moves on (gamma, log n), half the sweeps with every
@@ -212,6 +213,8 @@ class _MaterialChain(_JointChain):
         # alone was refused (acceptance 0.03 on a 24-facet prior draw at
         # sigma 0.57, its walkers' R-hat 5.7)
         carry = rng.random() < 0.5
+        # the state's density, where the last sweep's collective move left it
+        known, self._density = self._density, None
         order = rng.permutation(self.w)
         halves = (order[: self.w // 2], order[self.w // 2 :])
         out = None
@@ -241,7 +244,10 @@ class _MaterialChain(_JointChain):
                 new[..., 2] += s_new - s_old
                 lam_new[..., 1 : 1 + f_new.shape[-1]] += f_new - f_old
             lp_new = np.where(inside, self._conditional(new, hyper, lam_new, parts_new), -np.inf)
-            lp_old = self._conditional(old, hyper, lam, parts_old)
+            if known is None:
+                lp_old = self._conditional(old, hyper, lam, parts_old)
+            else:  # each walker's density is its own: the other half's move left it
+                lp_old = known[:, idx]
             with np.errstate(invalid="ignore"):
                 ok = np.log(rng.random(lp_new.shape)) < factor + lp_new - lp_old
             self.th[:, :, idx] = np.where(ok[:, None, :, None], new, old)
