@@ -23,13 +23,25 @@ default estimate is timed again with ``--lobe families``
 (:mod:`bayesgloss.lobe_families`: two fits more, the Ward and GGX lobes
 under the most-weighted sky family).
 
+With ``--against REV`` the default and ``--sky auto`` are timed, each in
+a fresh process, with the code of the git revision REV (checked out in
+``studies/out/bench_joint/against-REV``) and with today's, in turn, seed
+by seed: the code changes of a stop measured in one run. A fresh process
+also pays what a command-line run pays once (the population summary's
+table of Beta masses, about 3 s), which the in-process rows pay only in
+their first estimate.
+
 Usage: python studies/bench_joint.py [--repeats 3] [--jobs 1] [--max-sweeps N] [--before] [--lobes]
+       [--against REV]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -77,6 +89,77 @@ def variants(before: bool, lobes: bool) -> list[tuple[str, dict]]:
     if lobes:
         out.append(("default, lobe families", {"lobe": "families"}))
     return out
+
+
+#: One estimate in a fresh process (``--against``): its arguments as JSON in
+#: argv[1], its record as JSON on the last line of stdout.
+CHILD = """
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+from bayesgloss import bundle, estimate
+a = json.loads(sys.argv[1])
+b = bundle.read_bundle(a["path"])
+t0 = time.perf_counter()
+res = estimate.estimate_bundle(
+    b, seed=a["seed"], jobs=a["jobs"], sampler_options=a["options"] or None, **a["kw"]
+)
+obj = res.summary["object"]
+print(json.dumps({
+    "seconds": time.perf_counter() - t0,
+    "sweeps": res.summary["sampler"].get("sweeps"),
+    "converged": obj["converged"],
+    "gamma": obj["gamma"]["median"],
+    "hdi90": obj["gamma"]["hdi90"],
+}))
+"""
+
+
+def checkout(rev: str) -> Path:
+    """A git worktree of revision ``rev`` under :data:`OUT` (made once)."""
+    path = OUT / f"against-{rev}"
+    if not path.exists():
+        root = HERE.parent
+        cmd = ["git", "-C", str(root), "worktree", "add", "--detach", "-f", str(path), rev]
+        subprocess.run(cmd, check=True, capture_output=True)
+    return path
+
+
+def timed_in(tree: Path, args: dict) -> dict:
+    """One estimate (:data:`CHILD`) with the bayesgloss of ``tree``."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, json.dumps(args)],
+        env=env,
+        cwd=tree,  # not the caller's folder: python -c puts it first on sys.path
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def run_against(rev: str, repeats: int, jobs: int) -> dict:
+    """The default and ``--sky auto`` with revision ``rev``'s code and
+    today's, each in a fresh process, seeds in turn, the order of the two
+    codes alternating from seed to seed."""
+    from bayesgloss import sequences
+
+    (path,) = sequences.render_bundles([bench_config()], OUT, jobs=2, progress=False)
+    trees = [(rev, checkout(rev)), ("today", HERE.parent)]
+    rows = []
+    for seed in range(repeats):
+        for label, sky in (("auto", "auto"), ("default", None)):
+            for code, tree in trees if seed % 2 == 0 else trees[::-1]:
+                kw = {"illumination": sky}
+                args = {"path": str(path), "seed": seed, "jobs": jobs, "options": {}, "kw": kw}
+                row = {"variant": f"{label} ({code})", "seed": seed, "jobs": jobs}
+                rows.append(row | timed_in(tree, args))
+                print(json.dumps(rows[-1]), flush=True)
+    med = {
+        v: float(np.median([r["seconds"] for r in rows if r["variant"] == v]))
+        for v in dict.fromkeys(r["variant"] for r in rows)
+    }
+    return {"rows": rows, "median_seconds": med, "against": rev}
 
 
 def run(repeats: int, max_sweeps: int, lobes: bool = False, before=False, jobs=1) -> dict:
@@ -136,7 +219,20 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--max-sweeps", type=int, default=None, help="default: estimate's (2000 sweeps, 8000 steps)"
     )
+    ap.add_argument(
+        "--against", default=None, help="a git revision whose code to time beside today's"
+    )
     args = ap.parse_args(argv)
+    if args.against:
+        out = run_against(args.against, args.repeats, args.jobs)
+        OUT.mkdir(parents=True, exist_ok=True)
+        (OUT / f"bench_joint_against_{args.against}.json").write_text(json.dumps(out, indent=1))
+        med = out["median_seconds"]
+        print("median seconds:", json.dumps(med))
+        for label in ("auto", "default"):
+            old, new = med[f"{label} ({args.against})"], med[f"{label} (today)"]
+            print(f"{label}: {args.against} / today: {old / new:.2f}x")
+        return
     out = run(args.repeats, args.max_sweeps, args.lobes, args.before, args.jobs)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench_joint.json").write_text(json.dumps(out, indent=1))
