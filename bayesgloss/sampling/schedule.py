@@ -9,6 +9,12 @@ by the rule of :mod:`bayesgloss.diagnostics` (R-hat < 1.01, bulk and tail
 ESS >= 400), checked from ``min_sweeps`` on, or ``max_sweeps`` is reached
 (flagged). The kept second half is thinned to :class:`JointSamples`.
 
+The ensembles run in :data:`GROUPS` groups, each a chain of its own with
+its own random generator spawned from the seed (:func:`group_sizes`), so
+that two worker processes can run them at once (``jobs``); the rule is
+checked on all groups' draws together, and the draws do not depend on
+``jobs``.
+
 A run stopped at its cap unconverged carries its state (:class:`ChainRun`),
 and ``run_chain(..., resume=samples.run)`` runs the same chain on: the draws
 are those of one run with the larger cap, sweep for sweep (the sky
