@@ -12,6 +12,8 @@ given the object's illumination
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from . import illumination as il
@@ -272,15 +274,9 @@ def add_facet_posteriors(idata, samples, seed, jobs: int = 1) -> None:
     posterior (``gamma``, ``n``, ``s``, ``sigma`` per facet) and its run
     into ``samples.facets``; ``jobs`` worker processes share the facet
     sampler's streams (the draws do not depend on it)."""
-    options = {"seed": seed, "max_steps": FACETS_GIVEN_FRAMES_STEPS}
-    if jobs > 1:
-        with process_pool(jobs) as pool:
-            facet_draws, facet_run = sampling.facets_given_frames(
-                samples.data, samples.frames, pool=pool, **options
-            )
-    else:
+    with process_pool(jobs) if jobs > 1 else contextlib.nullcontext() as pool:
         facet_draws, facet_run = sampling.facets_given_frames(
-            samples.data, samples.frames, **options
+            samples.data, samples.frames, seed=seed, max_steps=FACETS_GIVEN_FRAMES_STEPS, pool=pool
         )
     fd = facet_draws.transpose(1, 2, 0, 3)  # (E, S', F, 4)
     values = {"gamma": fd[..., 0], "n": np.exp(fd[..., 1]), "s": np.exp(fd[..., 2])}

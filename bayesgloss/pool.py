@@ -12,7 +12,7 @@ import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["process_pool"]
+__all__ = ["process_pool", "shares"]
 
 
 def process_pool(jobs: int) -> ProcessPoolExecutor:
@@ -43,3 +43,11 @@ def _end_with_parent(parent: int) -> None:
     ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
     if os.getppid() != parent:  # the parent died before the request took effect
         os._exit(1)
+
+
+def shares(jobs: int, tasks: int) -> tuple[int, int]:
+    """How ``jobs`` processes are split over ``tasks`` fits: (processes
+    running fits at once, processes each fit gets for its own groups of
+    ensembles). One fit to each process while there are more fits than
+    processes; a single fit takes them all."""
+    return min(jobs, tasks), max(1, jobs // max(tasks, 1))

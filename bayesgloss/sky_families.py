@@ -87,7 +87,7 @@ from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import AUTO_SKIES, add_facet_posteriors, joint_fit, joint_max_sweeps
 from .loo import loo_table
-from .pool import process_pool
+from .pool import process_pool, shares
 
 __all__ = [
     "FAMILIES",
@@ -358,8 +358,7 @@ def _fit_each(names, args, seed, options, progress, jobs, resume=None) -> dict:
     the screen often runs on, takes them all); ``resume``: family to the
     samples of its fit to run on."""
     fits, resume = {}, resume or {}
-    outer = min(jobs, len(names))
-    inner = max(1, jobs // len(names))
+    outer, inner = shares(jobs, len(names))
     if outer > 1:
         with process_pool(outer) as pool:
             futures = {

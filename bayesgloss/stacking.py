@@ -42,7 +42,7 @@ from . import sky_families
 from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import add_facet_posteriors, joint_fit
-from .pool import process_pool
+from .pool import process_pool, shares
 
 __all__ = ["StackedFits", "fit_stacked"]
 
@@ -117,10 +117,13 @@ class StackedFits:
 def _fit_each(args, illumination, seed, options, choices, progress, jobs):
     """joint_fit of each choice (label to options) under one sky: {label: fit}."""
     fits = {}
-    if jobs > 1 and len(choices) > 1:
-        with process_pool(min(jobs, len(choices))) as pool:
+    outer, inner = shares(jobs, len(choices))
+    if outer > 1:
+        with process_pool(outer) as pool:
             futures = {
-                pool.submit(joint_fit, *args, illumination, seed, opts, facets=False): label
+                pool.submit(
+                    joint_fit, *args, illumination, seed, opts, facets=False, jobs=inner
+                ): label
                 for label, opts in choices.items()
             }
             for done, future in enumerate(as_completed(futures), 1):
@@ -129,8 +132,6 @@ def _fit_each(args, illumination, seed, options, choices, progress, jobs):
                     progress(done, len(choices))
     else:
         for label, opts in choices.items():
-            # a single choice takes every process for its groups of ensembles
-            inner = max(1, jobs // len(choices))
             fits[label] = joint_fit(*args, illumination, seed, opts, facets=False, jobs=inner)
             if progress is not None:
                 progress(len(fits), len(choices))

@@ -205,6 +205,18 @@ def _advance(chain_class, data, group, size, n_walkers, seed, burn_rounds, until
     return group
 
 
+def _joined(group: GroupRun | None, new: GroupRun) -> GroupRun:
+    """``group`` with the chain and the states kept of its advance ``new``
+    (:func:`_advance`), or ``new`` where the group had not started."""
+    if group is None:
+        return new
+    group.chain = new.chain
+    group.th_kept += new.th_kept
+    group.lam_kept += new.lam_kept
+    group.hyper_kept += new.hyper_kept
+    return group
+
+
 def _kept_half(groups, key: str, pick=slice(None)) -> np.ndarray:
     """The kept second half of every group's states ``key``, the groups'
     ensembles side by side: (n, E, ...)."""
@@ -261,14 +273,18 @@ def run_chain(
     try:
         while run.sweeps < max_sweeps:
             until = run.sweeps + chunk
-            args = [  # a group that has started carries its data in its chain
+            # a group that has started carries its data in its chain, and
+            # goes to the worker without its kept states: only the new come back
+            sent = [None if g is None else GroupRun(g.chain, g.burn) for g in run.groups]
+            args = [
                 (chain_class, None if g else data, g, size, n_walkers, sd, burn_rounds, until)
-                for g, size, sd in zip(run.groups, sizes, seeds, strict=True)
+                for g, size, sd in zip(sent, sizes, seeds, strict=True)
             ]
             if pool is None:
-                run.groups = [_advance(*a) for a in args]
+                done = [_advance(*a) for a in args]
             else:
-                run.groups = list(pool.map(_advance, *zip(*args, strict=True)))
+                done = list(pool.map(_advance, *zip(*args, strict=True)))
+            run.groups = [_joined(g, new) for g, new in zip(run.groups, done, strict=True)]
             run.sweeps = until
             if progress:
                 progress(run.sweeps, max_sweeps)
