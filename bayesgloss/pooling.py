@@ -21,6 +21,7 @@ import numpy as np
 from scipy import special
 
 from . import likelihood as lk
+from ._cache import cached_array
 
 __all__ = ["population_gloss", "shared_gloss"]
 
@@ -125,21 +126,51 @@ def _cell_edges(n: int) -> np.ndarray:
 def _beta_bin_masses(n_mu: int, n_kappa: int, n_bins: int):
     """log kappa grid (n_kappa,) and the mass of Beta(mu kappa, (1 - mu) kappa)
     in each of the ``n_bins`` cells of :func:`_cell_edges`, (n_mu n_kappa,
-    n_bins), mu at the centres (in u) of ``n_mu`` such cells (cached: the
-    same for every object)."""
-    mu = np.sin(0.5 * np.pi * (np.arange(n_mu) + 0.5) / n_mu) ** 2
+    n_bins), mu at the centres (in u) of ``n_mu`` such cells (the same for
+    every object: kept in memory and in the user's cache folder,
+    :mod:`bayesgloss._cache`, since it takes seconds to compute)."""
     lkap = np.linspace(np.log(0.5), np.log(1e4), n_kappa)
-    kap = np.exp(lkap)
-    a = (mu[:, None] * kap[None, :]).ravel()
-    b = ((1 - mu)[:, None] * kap[None, :]).ravel()
-    edges = _cell_edges(n_bins)
-    cdf = special.betainc(a[:, None], b[:, None], edges[None, :])
-    # float32 halves the table (n_mu n_kappa x n_bins); the log likelihood it
-    # gives errs by ~1e-7 relative, far below the grid's cell-to-cell range
-    masses = np.maximum(np.diff(cdf, axis=1), 0.0).astype(np.float32)  # rounding: far tails < 0
+    name = f"beta_bin_masses-v1-{n_mu}-{n_kappa}-{n_bins}"
+    shape = (n_mu * n_kappa, n_bins)
+    masses = cached_array(name, shape, np.float32, lambda: _beta_masses(n_mu, lkap, n_bins))
     masses.flags.writeable = False
     lkap.flags.writeable = False
     return lkap, masses
+
+
+def _beta_masses(n_mu: int, lkap: np.ndarray, n_bins: int) -> np.ndarray:
+    """The table of :func:`_beta_bin_masses`, computed.
+
+    Each bin's mass is a difference of the distribution function below the
+    mean and of the survival function, I_(1-x)(b, a), above it, so that no
+    tail is a difference of two numbers close to 1. The cells of mu and of
+    gamma are symmetric about 1/2 (to 3e-16) and Beta(b, a) is Beta(a, b)
+    mirrored, so the rows of mu > 1/2 are those of 1 - mu reversed: half the
+    9.6 million regularised incomplete beta functions.
+    """
+    half = (n_mu + 1) // 2  # mu below 1/2, and 1/2 itself when n_mu is odd
+    mu = np.sin(0.5 * np.pi * (np.arange(half) + 0.5) / n_mu) ** 2
+    kap = np.exp(lkap)
+    a = (mu[:, None] * kap[None, :]).ravel()[:, None]
+    b = ((1 - mu)[:, None] * kap[None, :]).ravel()[:, None]
+    edges = _cell_edges(n_bins)[None, :]
+    upper = edges > np.repeat(mu, len(kap))[:, None]  # (rows, n_bins + 1)
+    # below the mean I_x(a, b); above it 1 - I_x(a, b) = I_(1-x)(b, a)
+    tail = special.betainc(
+        np.where(upper, b, a), np.where(upper, a, b), np.where(upper, 1 - edges, edges)
+    )
+    cdf_lo = np.where(upper, np.nan, tail)  # P(gamma <= x) where x is below the mean
+    sf_hi = np.where(upper, tail, np.nan)  # P(gamma > x) where x is above it
+    mass = np.where(
+        upper[:, 1:],
+        np.where(upper[:, :-1], sf_hi[:, :-1] - sf_hi[:, 1:], 1.0 - cdf_lo[:, :-1] - sf_hi[:, 1:]),
+        cdf_lo[:, 1:] - cdf_lo[:, :-1],
+    )
+    # float32 halves the table (n_mu n_kappa x n_bins); the log likelihood it
+    # gives errs by ~1e-7 relative, far below the grid's cell-to-cell range
+    low = np.maximum(mass, 0.0).astype(np.float32).reshape(half, len(kap), n_bins)
+    high = low[: n_mu - half][::-1, :, ::-1]  # mu -> 1 - mu, gamma -> 1 - gamma
+    return np.concatenate([low, high]).reshape(n_mu * len(kap), n_bins)
 
 
 def shared_gloss(
