@@ -73,7 +73,9 @@ def result_files(result: EstimateResult) -> dict[str, bytes]:
 
     with tempfile.TemporaryDirectory() as tmp:
         nc = Path(tmp) / "posterior.nc"
-        result.idata.to_netcdf(str(nc))
+        # uncompressed: zlib (arviz's default) shrinks the draws' floats by
+        # only 8 % and took 2 s of a 25 s estimate; written plain in 0.3 s
+        result.idata.to_netcdf(str(nc), compress=False)
         data = nc.read_bytes()
     summary = {**result.summary, "posterior_sha256": hashlib.sha256(data).hexdigest()}
     return {"posterior.nc": data, "summary.json": json.dumps(summary, indent=2).encode()}

@@ -31,8 +31,12 @@ also pays what a command-line run pays once (the population summary's
 table of Beta masses, about 3 s), which the in-process rows pay only in
 their first estimate.
 
+With ``--variants auto-command`` (beside ``--against``) the command line
+``bayesgloss estimate BUNDLE --sky auto`` is timed as a user runs it, from
+the interpreter's start to the result files written.
+
 Usage: python studies/bench_joint.py [--repeats 3] [--jobs 1] [--max-sweeps N] [--before] [--lobes]
-       [--against REV]
+       [--against REV [--variants auto,default,auto-command]]
 """
 
 from __future__ import annotations
@@ -138,28 +142,59 @@ def timed_in(tree: Path, args: dict) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run_against(rev: str, repeats: int, jobs: int) -> dict:
-    """The default and ``--sky auto`` with revision ``rev``'s code and
-    today's, each in a fresh process, seeds in turn, the order of the two
-    codes alternating from seed to seed."""
-    from bayesgloss import sequences
+def timed_command(tree: Path, path: Path, seed: int, jobs: int) -> dict:
+    """``bayesgloss estimate BUNDLE --sky auto`` as a user runs it, with the
+    bayesgloss of ``tree``: wall-clock seconds from the interpreter's start to
+    the result files written (imports, reading, estimate, ``posterior.nc`` and
+    ``summary.json``)."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = OUT / "command-line" / f"{tree.name}-{seed}"
+    argv = ["bayesgloss", "estimate", str(path), "--sky", "auto", "--seed", str(seed)]
+    argv += ["--jobs", str(jobs), "--out", str(out), "--quiet"]
+    code = f"import sys; from bayesgloss.cli import main; sys.argv = {argv!r}; main()"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", code], env=env, cwd=tree, check=True, capture_output=True)
+    seconds = time.perf_counter() - t0
+    obj = json.loads((out / "summary.json").read_text())["object"]
+    return {"seconds": seconds, "converged": obj["converged"], "gamma": obj["gamma"]["median"]}
+
+
+#: The variants ``--against`` can time: (label, sky) for an estimate in a
+#: fresh process; ``auto-command`` is :func:`timed_command`.
+AGAINST_VARIANTS = {"auto": "auto", "default": None, "auto-command": "command"}
+
+
+def run_against(rev: str, repeats: int, jobs: int, labels=("auto", "default")) -> dict:
+    """The ``labels`` of :data:`AGAINST_VARIANTS` (the default and ``--sky
+    auto``) with revision ``rev``'s code and today's, each in a fresh process,
+    seeds in turn, the order of the two codes alternating from seed to seed.
+    Whether the user's cache already held the population's table of Beta
+    masses (:mod:`bayesgloss._cache`, new at stop 39) is recorded: a warm
+    cache is every run's state but a machine's first."""
+    from bayesgloss import _cache, sequences
 
     (path,) = sequences.render_bundles([bench_config()], OUT, jobs=2, progress=False)
+    folder = _cache.cache_dir()
+    warm = folder is not None and any(folder.glob("beta_bin_masses-*.npy"))
     trees = [(rev, checkout(rev)), ("today", HERE.parent)]
     rows = []
     for seed in range(repeats):
-        for label, sky in (("auto", "auto"), ("default", None)):
+        for label in labels:
+            sky = AGAINST_VARIANTS[label]
             for code, tree in trees if seed % 2 == 0 else trees[::-1]:
-                kw = {"illumination": sky}
-                args = {"path": str(path), "seed": seed, "jobs": jobs, "options": {}, "kw": kw}
                 row = {"variant": f"{label} ({code})", "seed": seed, "jobs": jobs}
-                rows.append(row | timed_in(tree, args))
+                if sky == "command":
+                    rows.append(row | timed_command(tree, path, seed, jobs))
+                else:
+                    kw = {"illumination": sky}
+                    args = {"path": str(path), "seed": seed, "jobs": jobs, "options": {}, "kw": kw}
+                    rows.append(row | timed_in(tree, args))
                 print(json.dumps(rows[-1]), flush=True)
     med = {
         v: float(np.median([r["seconds"] for r in rows if r["variant"] == v]))
         for v in dict.fromkeys(r["variant"] for r in rows)
     }
-    return {"rows": rows, "median_seconds": med, "against": rev}
+    return {"rows": rows, "median_seconds": med, "against": rev, "beta_table_cached": warm}
 
 
 def run(repeats: int, max_sweeps: int, lobes: bool = False, before=False, jobs=1) -> dict:
@@ -222,14 +257,20 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--against", default=None, help="a git revision whose code to time beside today's"
     )
+    ap.add_argument(
+        "--variants",
+        default="auto,default",
+        help=f"with --against, which of {','.join(AGAINST_VARIANTS)} (comma-separated)",
+    )
     args = ap.parse_args(argv)
     if args.against:
-        out = run_against(args.against, args.repeats, args.jobs)
+        labels = tuple(args.variants.split(","))
+        out = run_against(args.against, args.repeats, args.jobs, labels)
         OUT.mkdir(parents=True, exist_ok=True)
         (OUT / f"bench_joint_against_{args.against}.json").write_text(json.dumps(out, indent=1))
         med = out["median_seconds"]
         print("median seconds:", json.dumps(med))
-        for label in ("auto", "default"):
+        for label in labels:
             old, new = med[f"{label} ({args.against})"], med[f"{label} (today)"]
             print(f"{label}: {args.against} / today: {old / new:.2f}x")
         return
