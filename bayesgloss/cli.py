@@ -640,10 +640,11 @@ def _parser() -> argparse.ArgumentParser:
     es.add_argument(
         "--lobe",
         default=None,
-        choices=(*LOBE_FAMILIES, "families"),
+        choices=(*LOBE_FAMILIES, "families", "materials"),
         help="the glossy lobe's family (default 'phong'): Radiance's 'ward', a GGX "
         "microfacet lobe with Smith shadowing 'ggx', or 'families': one fit per family, "
-        "stacked by PSIS-LOO (bayesgloss.lobes, bayesgloss.lobe_families)",
+        "stacked by PSIS-LOO (bayesgloss.lobes, bayesgloss.lobe_families), or "
+        "'materials': those and GGX with Schlick's Fresnel (a dielectric coating), stacked",
     )
     es.add_argument(
         "--occluder-albedo",

@@ -25,7 +25,8 @@ PSIS-LOO stacking weights (:mod:`bayesgloss.sky_families`; the facets'
 and frames' answers are the most-weighted fit's). ``lobe="families"`` fits
 the glossy lobe of each family of :mod:`bayesgloss.lobes` (Phong, Ward, GGX)
 under the most-weighted sky and stacks them the same way
-(:mod:`bayesgloss.lobe_families`; opt-in). The summaries below are
+(:mod:`bayesgloss.lobe_families`; opt-in); ``lobe="materials"`` stacks, beside
+the three, GGX with Schlick's Fresnel, a dielectric coating's (opt-in). The summaries below are
 kept beside it (a facet population's mu misled on overcast days: the
 facets' posteriors share the frames, and their product read confident
 answers the data did not hold).
@@ -83,6 +84,7 @@ entries); the object the same, ``mostly-saturated`` over the facets used.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -276,10 +278,13 @@ def estimate_bundle(
         The one-material model's Fresnel model (:mod:`bayesgloss.fresnel`;
         per-frame illumination only); default
         :data:`bayesgloss.joint_estimate.DEFAULT_FRESNEL`.
-    lobe : {"phong", "ward", "ggx", "families"}, optional
+    lobe : {"phong", "ward", "ggx", "families", "materials"}, optional
         The glossy lobe's family (:mod:`bayesgloss.lobes`; per-frame
         illumination only), or ``"families"``: one fit per family, stacked
-        by PSIS-LOO (:mod:`bayesgloss.lobe_families`); default
+        by PSIS-LOO (:mod:`bayesgloss.lobe_families`), or ``"materials"``:
+        those and GGX with Schlick's Fresnel
+        (:data:`bayesgloss.lobe_families.MATERIAL_FAMILIES`; ``fresnel``
+        must then be left at its default); default
         :data:`bayesgloss.joint_estimate.DEFAULT_LOBE_FAMILY`.
     occluder_albedo : {"fixed", "stacked"}, optional
         For a bundle with an ``object_mesh`` (per-frame illumination only):
@@ -287,7 +292,7 @@ def estimate_bundle(
         or one fit per albedo of :data:`bayesgloss.occluder_albedo.OCCLUDER_ALBEDOS`
         stacked by PSIS-LOO (:mod:`bayesgloss.occluder_albedo`); default
         :data:`bayesgloss.occluder_albedo.DEFAULT_OCCLUDER_ALBEDO`, and
-        ``"fixed"`` with ``lobe="families"`` (one stack at a time; asking for
+        ``"fixed"`` with ``lobe="families"`` or ``"materials"`` (one stack at a time; asking for
         both is an error). Without a mesh it changes nothing.
     ground_facing : {"leave-out", "keep"}, optional
         Facets facing the ground in a bundle without an ``object_mesh``
@@ -341,8 +346,14 @@ def estimate_bundle(
             "illumination (relative noise and a known pixel response); name a sky model"
         )
     lobe = lobe or DEFAULT_LOBE_FAMILY
-    if lobe != "families":
+    lobe_stacked = lobe in ("families", "materials")
+    if not lobe_stacked:
         check_lobe_family(lobe)
+    if lobe == "materials" and fresnel != DEFAULT_FRESNEL:
+        raise ValueError(
+            f"lobe 'materials' chooses each fit's Fresnel model itself; fresnel "
+            f"'{fresnel}' cannot be given with it"
+        )
     if lobe != DEFAULT_LOBE_FAMILY and not joint:
         raise ValueError(
             f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
@@ -354,23 +365,24 @@ def estimate_bundle(
     if joint:
         sampler_options["fresnel"] = fresnel
         sampler_options["ground_shadow"] = shadow
-        if lobe != "families":
+        if not lobe_stacked:
             sampler_options["lobe_family"] = lobe
     if occluder_albedo is None:  # the lobe families' stack keeps the faces at one albedo
-        occluder_albedo = "fixed" if lobe == "families" else DEFAULT_OCCLUDER_ALBEDO
+        occluder_albedo = "fixed" if lobe_stacked else DEFAULT_OCCLUDER_ALBEDO
     occluder = check_occluder_albedo_mode(occluder_albedo)
     stack_occluder = occluder == "stacked" and joint and b.has_mesh
-    if stack_occluder and lobe == "families":
+    if stack_occluder and lobe_stacked:
         raise ValueError(
-            "occluder albedo 'stacked' and lobe 'families' each fit and stack several "
+            f"occluder albedo 'stacked' and lobe '{lobe}' each fit and stack several "
             "models; name a lobe, or fix the occluder albedo"
         )
     # a part of the model fitted once per choice and stacked: (fitter, what, summary key)
     stacked = None
     if stack_occluder:
         stacked = fit_occluder_albedos, "occluder albedo", "occluder_albedos"
-    elif lobe == "families":
-        stacked = lobe_families.fit_lobe_families, "lobe family", "lobe_families"
+    elif lobe_stacked:
+        fit = functools.partial(lobe_families.fit_lobe_families, materials=lobe == "materials")
+        stacked = fit, "lobe family", "lobe_families"
     families = part = None
     if stacked is not None:
         fit, what, key = stacked

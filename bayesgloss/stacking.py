@@ -169,11 +169,13 @@ def fit_stacked(
     seed : int
     options : dict
         Sampler options; ``option`` is set per fit.
-    option : str
+    option : str or tuple of str
         The option of :func:`~bayesgloss.joint_estimate.joint_fit` that
-        varies (``"lobe_family"``, ``"occluder_albedo"``).
+        varies (``"lobe_family"``, ``"occluder_albedo"``), or several that
+        vary together (``("lobe_family", "fresnel")``).
     choices : dict of str to object
-        Label to the option's value, in the order of the results.
+        Label to the option's value (a tuple of values, one per option, where
+        ``option`` is a tuple), in the order of the results.
     default : str
         The label fitted with the sky families where they are stacked.
     attribute : str
@@ -186,11 +188,13 @@ def fit_stacked(
         As :func:`bayesgloss.sky_families.fit_families`' (the sky's stack).
     """
     args = (b, curves, y, usable, censored, keep)
-    options = {k: v for k, v in options.items() if k != option}
+    keys = (option,) if isinstance(option, str) else tuple(option)
+    options = {k: v for k, v in options.items() if k not in keys}
     labels = list(choices)
 
     def opts(label):
-        return {**options, option: choices[label]}
+        values = (choices[label],) if isinstance(option, str) else choices[label]
+        return {**options, **dict(zip(keys, values, strict=True))}
 
     seconds, sky_info = 0.0, None
     if illumination == "families":
