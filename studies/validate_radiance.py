@@ -605,7 +605,8 @@ def write_summary(scores: list[dict], set_name: str, max_sweeps: int) -> dict:
         scores, bundles, RESULTS / f"{name}_broken_cloud_sun.png"
     )
     run = methods_run(scores)
-    title = "Mitsuba validation set" if set_name.startswith("mitsuba") else "Radiance validation set"
+    mitsuba = set_name.startswith("mitsuba")
+    title = "Mitsuba validation set" if mitsuba else "Radiance validation set"
     figure(scores, RESULTS / f"{name}.png", run, title)
     calibration = calibration_figure(scores, RESULTS / f"{name}_calibration.png", run)
     if calibration is not None:
