@@ -29,7 +29,8 @@ Each bundle's scores are cached in ``studies/out/<set>/scores``
 Usage: python studies/validate_radiance.py [--jobs 2] [--max-sweeps 2000]
 [--redo per-frame ...] (score those methods afresh, keeping the others' cached scores)
 [--set validation_set|validation_holdout|...] [--summary-only] (rebuild the
-tables and figures from the committed scores, fitting nothing)
+tables and figures from the committed scores, fitting nothing) [--summary-cached]
+(the same from the scores cached so far, for a run stopped part way)
 """
 
 from __future__ import annotations
@@ -630,8 +631,23 @@ def main(argv=None) -> None:
         help="fit nothing: rebuild the tables and figures from the set's committed scores "
         "(the broken-cloud figure needs the set's bundles)",
     )
+    ap.add_argument(
+        "--summary-cached",
+        action="store_true",
+        help="fit nothing: write the tables and figures of the scores cached so far "
+        "(a run stopped part way; its results then hold only the bundles scored)",
+    )
     args = ap.parse_args(argv)
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
+    if args.summary_cached:
+        cached = sorted((HERE / "out" / args.set / "scores").glob("*.json"))
+        scores = [json.loads(f.read_text()) for f in cached]
+        scores = [s for s in scores if all(m in s for m in methods)]
+        summary = write_summary(scores, args.set, args.max_sweeps)
+        print(f"{len(scores)} bundles scored by {', '.join(methods)}")
+        for cat, row in summary["table"].items():
+            print(cat, json.dumps(row))
+        return
     bundles = HERE / "out" / args.set / "bundles"
     results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
