@@ -106,7 +106,6 @@ from .joint_estimate import (
     joint_fit,
     sky_model_summary,
 )
-from .lobes import check_lobe_family
 from .model_error import model_error_sd, with_model_error
 from .object_shadow import DEFAULT_GROUND_SHADOW, check_ground_shadow
 from .occluder_albedo import (
@@ -345,20 +344,7 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
-    lobe = lobe or DEFAULT_LOBE_FAMILY
-    lobe_stacked = lobe in ("families", "materials")
-    if not lobe_stacked:
-        check_lobe_family(lobe)
-    if lobe == "materials" and fresnel != DEFAULT_FRESNEL:
-        raise ValueError(
-            f"lobe 'materials' chooses each fit's Fresnel model itself; fresnel "
-            f"'{fresnel}' cannot be given with it"
-        )
-    if lobe != DEFAULT_LOBE_FAMILY and not joint:
-        raise ValueError(
-            f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
-            "pixel response); the fixed-brightness estimator has the Phong lobe only"
-        )
+    lobe, lobe_stacked = lobe_families.check_lobe(lobe or DEFAULT_LOBE_FAMILY, fresnel, joint)
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
     if shadow != DEFAULT_GROUND_SHADOW and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")

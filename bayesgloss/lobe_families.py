@@ -36,10 +36,10 @@ is each family's Phong-equivalent exponent (:func:`bayesgloss.lobes.roughness_of
 from __future__ import annotations
 
 from .intervals import posterior_quantiles as _quantiles
-from .lobes import LOBE_FAMILIES, roughness_of_exponent
+from .lobes import LOBE_FAMILIES, check_lobe_family, roughness_of_exponent
 from .stacking import fit_stacked
 
-__all__ = ["MATERIAL_FAMILIES", "fit_lobe_families"]
+__all__ = ["MATERIAL_FAMILIES", "check_lobe", "fit_lobe_families"]
 
 #: ``--lobe materials``: label to (lobe family, Fresnel model) of each fit.
 MATERIAL_FAMILIES = {
@@ -48,6 +48,27 @@ MATERIAL_FAMILIES = {
     "ggx": ("ggx", "none"),
     "ggx-schlick": ("ggx", "schlick"),
 }
+
+
+def check_lobe(lobe: str, fresnel: str, joint: bool) -> tuple[str, bool]:
+    """``estimate``'s ``lobe`` checked against its other options: (lobe,
+    whether it is a stack, ``"families"`` or ``"materials"``). A ValueError
+    for an unknown family, a Fresnel model named with ``"materials"`` (which
+    chooses each fit's own), or any lobe but Phong without the joint model."""
+    stacked = lobe in ("families", "materials")
+    if not stacked:
+        check_lobe_family(lobe)
+    if lobe == "materials" and fresnel != "none":
+        raise ValueError(
+            f"lobe 'materials' chooses each fit's Fresnel model itself; fresnel "
+            f"'{fresnel}' cannot be given with it"
+        )
+    if lobe != "phong" and not joint:
+        raise ValueError(
+            f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
+            "pixel response); the fixed-brightness estimator has the Phong lobe only"
+        )
+    return lobe, stacked
 
 
 def fit_lobe_families(
