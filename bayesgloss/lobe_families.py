@@ -36,6 +36,7 @@ is each family's Phong-equivalent exponent (:func:`bayesgloss.lobes.roughness_of
 from __future__ import annotations
 
 from .intervals import posterior_quantiles as _quantiles
+from .joint_estimate import DEFAULT_FRESNEL, DEFAULT_LOBE_FAMILY
 from .lobes import LOBE_FAMILIES, check_lobe_family, roughness_of_exponent
 from .stacking import fit_stacked
 
@@ -54,16 +55,16 @@ def check_lobe(lobe: str, fresnel: str, joint: bool) -> tuple[str, bool]:
     """``estimate``'s ``lobe`` checked against its other options: (lobe,
     whether it is a stack, ``"families"`` or ``"materials"``). A ValueError
     for an unknown family, a Fresnel model named with ``"materials"`` (which
-    chooses each fit's own), or any lobe but Phong without the joint model."""
+    chooses each fit's own), or any lobe but the default without the joint model."""
     stacked = lobe in ("families", "materials")
     if not stacked:
         check_lobe_family(lobe)
-    if lobe == "materials" and fresnel != "none":
+    if lobe == "materials" and fresnel != DEFAULT_FRESNEL:
         raise ValueError(
             f"lobe 'materials' chooses each fit's Fresnel model itself; fresnel "
             f"'{fresnel}' cannot be given with it"
         )
-    if lobe != "phong" and not joint:
+    if lobe != DEFAULT_LOBE_FAMILY and not joint:
         raise ValueError(
             f"lobe '{lobe}' needs per-frame illumination (relative noise and a known "
             "pixel response); the fixed-brightness estimator has the Phong lobe only"

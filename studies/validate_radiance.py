@@ -639,22 +639,19 @@ def main(argv=None) -> None:
     )
     args = ap.parse_args(argv)
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
-    if args.summary_cached:
-        cached = sorted((HERE / "out" / args.set / "scores").glob("*.json"))
-        scores = [json.loads(f.read_text()) for f in cached]
-        scores = [s for s in scores if all(m in s for m in methods)]
-        summary = write_summary(scores, args.set, args.max_sweeps)
-        print(f"{len(scores)} bundles scored by {', '.join(methods)}")
-        for cat, row in summary["table"].items():
-            print(cat, json.dumps(row))
-        return
     bundles = HERE / "out" / args.set / "bundles"
     results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
     if results.exists():
         saved = json.loads(results.read_text())
         committed = {s["bundle"]: s for s in saved["sequences"]}
-    if args.summary_only:
+    if args.summary_cached:
+        cached = sorted((HERE / "out" / args.set / "scores").glob("*.json"))
+        scores = [json.loads(f.read_text()) for f in cached]
+        scores = [s for s in scores if all(m in s for m in methods)]
+        print(f"{len(scores)} bundles scored by {', '.join(methods)}")
+        summary = write_summary(scores, args.set, args.max_sweeps)
+    elif args.summary_only:
         if not committed:
             raise SystemExit(f"validate_radiance: no scores in {results} to summarise")
         summary = write_summary(list(committed.values()), args.set, saved["max_sweeps"])

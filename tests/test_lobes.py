@@ -115,6 +115,19 @@ def _lobe_bundle(path, family, exponent, gamma, seed=1):
     return make_synthetic_bundle(path, noise=0.02, seed=seed, radiance=radiance)
 
 
+def _stacked_under_clear_sky(path, lobe="families"):
+    """``estimate`` of a stack of lobes (``lobe``) under gensky's clear sky,
+    named, 600 sweeps at most, two jobs."""
+    return estimate.estimate_bundle(
+        path,
+        per_frame=True,
+        illumination="gensky-clear",
+        lobe=lobe,
+        jobs=2,
+        sampler_options={"max_steps": 600},
+    )
+
+
 @pytest.mark.parametrize(
     ("family", "exponent", "gamma"), [("ward", 200.0, 0.5), ("ggx", 50.0, 0.3)]
 )
@@ -123,15 +136,7 @@ def test_stacking_names_the_generating_lobe_family(tmp_path, family, exponent, g
     # family's PSIS-LOO was 150+ nats above the others' in trials (phong read
     # 0.47 and 0.20 for these), so its weight must be near 1 and the
     # object's interval hold the truth
-    path = _lobe_bundle(tmp_path / family, family, exponent, gamma)
-    res = estimate.estimate_bundle(
-        path,
-        per_frame=True,
-        illumination="gensky-clear",
-        lobe="families",
-        jobs=2,
-        sampler_options={"max_steps": 600},
-    )
+    res = _stacked_under_clear_sky(_lobe_bundle(tmp_path / family, family, exponent, gamma))
     s = res.summary
     assert s["lobe_families"][family]["weight"] > 0.95
     assert s["lobe_family"] == family
@@ -179,15 +184,7 @@ def test_stacking_the_materials_names_a_dielectric_coating(tmp_path):
     # summary names each fit's lobe and Fresnel model
     gamma, albedo = 0.04 / (0.04 + 0.96 * 0.25), 0.04 + 0.96 * 0.25
     path = _coated_bundle(tmp_path / "coated", gamma, albedo, 400.0)
-    res = estimate.estimate_bundle(
-        path,
-        per_frame=True,
-        illumination="gensky-clear",
-        lobe="materials",
-        jobs=2,
-        sampler_options={"max_steps": 600},
-    )
-    s = res.summary
+    s = _stacked_under_clear_sky(path, lobe="materials").summary
     assert list(s["lobe_families"]) == ["phong", "ward", "ggx", "ggx-schlick"]
     assert s["lobe_families"]["ggx-schlick"]["weight"] > 0.95
     assert s["lobe_families"]["ggx-schlick"]["fresnel"] == "schlick"

@@ -106,7 +106,7 @@ def test_population_of_facets_pinned_at_the_bounds():
 # -- the table of Beta masses ------------------------------------------------------
 
 
-def test_beta_bin_masses_match_scipy_in_both_tails():
+def test_beta_bin_masses_match_scipy_in_both_tails(monkeypatch):
     """Every bin's mass of Beta(mu kappa, (1 - mu) kappa) against scipy.stats'
     distribution and survival functions (the latter above the mean, so that
     the reference has no cancellation either), on a small grid with an odd
@@ -115,7 +115,10 @@ def test_beta_bin_masses_match_scipy_in_both_tails():
     (6e-8), and a difference of distribution functions near 1, the error
     the table avoids, is off by up to 10x in the far tail."""
     n_mu, n_kappa, n_bins = 15, 6, 40
+    monkeypatch.setenv("BAYESGLOSS_CACHE_DIR", "")  # computed here, not read from a cache
+    pooling._beta_bin_masses.cache_clear()
     lkap, masses = pooling._beta_bin_masses(n_mu, n_kappa, n_bins)
+    pooling._beta_bin_masses.cache_clear()
     masses = masses.reshape(n_mu, n_kappa, n_bins).astype(float)
     edges = pooling._cell_edges(n_bins)
     mu = np.sin(0.5 * np.pi * (np.arange(n_mu) + 0.5) / n_mu) ** 2
