@@ -58,6 +58,7 @@ SETS = {
     "validation_holdout5": "validation_holdout5",
     "validation_holdout6": "validation_holdout6",
     "validation_holdout7": "validation_holdout7",
+    "validation_holdout8": "validation_holdout8",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
 }
@@ -96,6 +97,7 @@ DEFAULT_METHODS = {
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
     "validation_holdout7": ("baseline", "fixed", "families", "shadow"),
+    "validation_holdout8": ("baseline", "families", "materials"),
 }
 
 
