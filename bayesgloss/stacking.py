@@ -12,6 +12,15 @@ predictive densities (Yao, Vehtari, Simpson & Gelman 2018;
 cannot tell from another then widens the object's interval instead of
 biasing it.
 
+Stacking weights are not identified among fits whose predictive densities
+are the same: any split of the weight between them is optimal, and the
+optimiser may hand all of it to one (Mitsuba holdout 1, ms16: four lobe
+fits of an overcast day within 1.2 of each other in elpd, gammas 0.11 to
+0.95, Ward given weight 1.00, the object read 0.94 for a true 0.10). With
+``ties="spread"`` (:func:`spread_tied_weights`) the fits tied with the best
+share their weight evenly, the uniform prior over choices the data do not
+tell apart, so the interval carries every tied answer.
+
 The sky is chosen first: with ``illumination="families"`` the sky families
 are stacked with the part's default choice
 (:func:`bayesgloss.sky_families.fit_families`) and the other choices are
@@ -44,10 +53,48 @@ from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import add_facet_posteriors, joint_fit
 from .pool import process_pool, shares
 
-__all__ = ["StackedFits", "fit_stacked"]
+__all__ = ["TIED_ELPD", "StackedFits", "fit_stacked", "spread_tied_weights"]
 
 #: Posterior variables of the object that the stacked mixture replaces.
 MIXED = ("gamma_object", "n_object", "roughness_object")
+#: PSIS-LOO elpd difference from the best below which a fit predicts the
+#: data as well as the best: differences under 4 are small next to the
+#: estimate's own error (Sivula, Magnusson & Vehtari 2020).
+TIED_ELPD = 4.0
+#: How :func:`fit_stacked` weighs fits tied with the best.
+TIES = ("stacking", "spread")
+
+
+def spread_tied_weights(scores: dict, tied_elpd: float = TIED_ELPD) -> dict:
+    """Stacking weights with the fits tied with the best sharing their
+    weight evenly.
+
+    Parameters
+    ----------
+    scores : dict of str to dict
+        :func:`~bayesgloss.sky_families.loo_stacking_weights`' entries
+        (``weight``, ``elpd_diff`` from the best fit).
+    tied_elpd : float
+        A fit whose ``elpd_diff`` is below it is tied with the best.
+
+    Returns
+    -------
+    dict
+        ``scores`` where fewer than two fits are tied; else a copy in which
+        each tied fit's ``weight`` is the tied fits' total weight over their
+        number, its stacking weight kept as ``stacking_weight``, and
+        ``tied`` marks the tied fits. The other fits keep their weights,
+        so the weights still sum to one.
+    """
+    tied = [label for label, s in scores.items() if s["elpd_diff"] < tied_elpd]
+    if len(tied) < 2:
+        return scores
+    share = sum(scores[label]["weight"] for label in tied) / len(tied)
+    out = {label: dict(s, tied=label in tied) for label, s in scores.items()}
+    for label in tied:
+        out[label]["stacking_weight"] = out[label]["weight"]
+        out[label]["weight"] = share
+    return out
 
 
 @dataclass
@@ -157,6 +204,7 @@ def fit_stacked(
     jobs=1,
     overcast_variants=False,
     unreliable_loo="equal",
+    ties="stacking",
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
 
@@ -186,7 +234,12 @@ def fit_stacked(
         Fits at once in worker processes.
     overcast_variants, unreliable_loo
         As :func:`bayesgloss.sky_families.fit_families`' (the sky's stack).
+    ties : {"stacking", "spread"}
+        The stacking weights as they are, or with the choices tied with the
+        best sharing their weight (:func:`spread_tied_weights`).
     """
+    if ties not in TIES:
+        raise ValueError(f"unknown ties {ties!r}; valid: {', '.join(TIES)}")
     args = (b, curves, y, usable, censored, keep)
     keys = (option,) if isinstance(option, str) else tuple(option)
     options = {k: v for k, v in options.items() if k not in keys}
@@ -220,6 +273,8 @@ def fit_stacked(
         )
     own = {label: fits[label][0].posterior.copy(deep=True) for label in labels}
     scores = sky_families.loo_stacking_weights({label: fits[label][0] for label in labels})
+    if ties == "spread":
+        scores = spread_tied_weights(scores)
     weights = np.array([scores[label]["weight"] for label in labels])
     best = labels[int(np.argmax(weights))]
     idata, samples, used = fits[best]

@@ -1,5 +1,6 @@
 """One fit per choice of a model's part, stacked (bayesgloss.stacking)."""
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -107,3 +108,62 @@ def test_the_sky_options_reach_the_sky_families_under_a_second_stack(tmp_path, m
             )
         assert got.value.args[0]["unreliable_loo"] == "stack", lobe
         assert got.value.args[0]["overcast_variants"] is True, lobe
+
+
+def test_fits_tied_with_the_best_share_its_weight():
+    # Mitsuba holdout 1, ms16 (stop 40): four equally predictive lobe fits of
+    # an overcast day, Ward given weight 1.00 by the optimiser on an elpd
+    # difference of 0.0; spread, the four share it. A fit 4 or more below
+    # the best keeps its own stacking weight (ms05: the coating's 0.36)
+    def scores(weight, diff):
+        return {k: {"weight": w, "elpd_diff": d} for k, w, d in zip("abcd", weight, diff)}
+
+    ms16 = stacking.spread_tied_weights(scores([0.0, 1.0, 0.0, 0.0], [0.24, 0.0, 0.02, 1.2]))
+    assert [ms16[k]["weight"] for k in "abcd"] == [0.25] * 4
+    assert ms16["b"]["stacking_weight"] == 1.0 and all(ms16[k]["tied"] for k in "abcd")
+    ms05 = stacking.spread_tied_weights(scores([0.0, 0.64, 0.0, 0.36], [3.9, 0.0, 96.0, 71.0]))
+    assert [ms05[k]["weight"] for k in "abcd"] == pytest.approx([0.32, 0.32, 0.0, 0.36])
+    assert not ms05["d"]["tied"] and "stacking_weight" not in ms05["d"]
+    clear = scores([0.0, 1.0, 0.0, 0.0], [200.0, 0.0, 131.0, 4.0])
+    assert stacking.spread_tied_weights(clear) is clear  # one fit tied with itself
+
+
+def test_a_spread_stack_carries_every_tied_fits_gamma(monkeypatch):
+    # three fits whose log densities differ by 0.005-0.01 an entry (elpd
+    # 0.06-0.12 apart) and gammas 0.1, 0.2, 0.3: stacking alone gives the
+    # first all the weight; spread, the mixture's draws hold each in a third
+    # (100 draws picked by weight: at p = 1/3 fewer than 20 is a 0.2 %
+    # event); a clear winner (5 an entry above the others, 60 in elpd)
+    # keeps weight 1
+    calls = _fake_fits(monkeypatch, {"ward": -6.01, "ggx": -6.005}, spread=0.05)
+    alone = _stack()
+    assert alone.scores["phong"]["weight"] > 0.99
+    calls.clear()
+    tied = _stack(ties="spread")
+    assert calls == ["phong", "ward", "ggx"]
+    weights = json.loads(tied.idata.posterior.attrs["lobe_family_weights"])
+    assert weights == pytest.approx({"phong": 1 / 3, "ward": 1 / 3, "ggx": 1 / 3})
+    gamma = np.round(tied.idata.posterior["gamma_object"].values.ravel(), 6)
+    for value in (0.1, 0.2, 0.3):
+        assert np.sum(gamma == value) >= 20, value
+    _fake_fits(monkeypatch, {"ward": -1.0}, spread=0.05)
+    clear = _stack(ties="spread")
+    assert clear.best == "ward" and clear.scores["ward"]["weight"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="unknown ties"):
+        _stack(ties="even")
+
+
+def test_the_lobe_stacks_spread_ties(monkeypatch):
+    from bayesgloss import lobe_families
+
+    class Called(Exception):
+        pass
+
+    def spy(*args, **kwargs):
+        raise Called(kwargs)
+
+    monkeypatch.setattr(lobe_families, "fit_stacked", spy)
+    for materials in (False, True):
+        with pytest.raises(Called) as got:
+            lobe_families.fit_lobe_families(*(None,) * 6, "families", 0, {}, materials=materials)
+        assert got.value.args[0]["ties"] == "spread"
