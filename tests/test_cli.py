@@ -13,6 +13,7 @@ import pytest
 from bayesgloss import cli
 
 
+@pytest.mark.long
 @pytest.mark.radiance
 def test_demo_runs_the_main_job(tmp_path, capsys):
     # renders the built-in default sequence with Radiance, runs the baseline and
@@ -137,6 +138,7 @@ def test_max_steps_bounds_every_facet(odd_bundles, capsys):
     assert summary["sampler"]["median_steps"] == 100
 
 
+@pytest.mark.long
 def test_commands_print_no_third_party_warning(odd_bundles, tmp_path):
     # run as a user does, in a fresh interpreter with Python's default warning
     # filters and an empty cache folder (so ArviZ's once-a-day refactor notice
@@ -211,6 +213,7 @@ def test_bad_out_is_said_before_any_work(odd_bundles, tmp_path, monkeypatch, cap
     assert where == "read-only" or blocker.read_text() == "a user's file"
 
 
+@pytest.mark.long
 def test_estimate_out_is_written_as_one_set(odd_bundles, tmp_path, capsys):
     # an older run's files do not survive beside the new ones (report once drew
     # an old comparison into a new figure); other files of the folder stay; the

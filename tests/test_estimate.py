@@ -103,6 +103,7 @@ def test_sbc_detects_a_wrong_posterior(paper_bases):
         _check_uniform_ranks(ranks)
 
 
+@pytest.mark.long
 @pytest.mark.radiance
 def test_estimate_cli_json_on_a_rendered_bundle(tmp_path):
     # a small matt hemisphere rendered by Radiance: the JSON has the promised

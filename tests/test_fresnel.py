@@ -170,6 +170,7 @@ def test_dark_smooth_plastic_needs_the_fresnel_raise(paper_three_skies):
     assert abs(np.exp(np.median(res.draws[0, ..., 5])) / 0.232 - 1) < 0.2
 
 
+@pytest.mark.long
 def test_a_dielectric_coating_is_read_with_schlicks_rise(paper_three_skies_schlick):
     # a dark dielectric-coated material (F0 0.04 over a diffuse base of 0.2:
     # gamma 0.04 / (0.04 + 0.96 x 0.2) = 0.172, A 0.232) with Schlick's rise
@@ -195,6 +196,7 @@ def test_a_dielectric_coating_is_read_with_schlicks_rise(paper_three_skies_schli
     assert np.median(res.draws[0, ..., 4]) > 0.9
 
 
+@pytest.mark.long
 def test_without_data_the_fresnel_unknowns_keep_their_prior(paper_three_skies):
     # no usable observation: k uniform on [0, 1] (mean 1/2) and log A uniform
     # on its range; a move that is not reversible in the new coordinates, or

@@ -129,6 +129,7 @@ def test_sky_model_weights_are_uniform_on_the_simplex_a_priori(paper_three_skies
     np.testing.assert_allclose(np.mean(w < 0.1, axis=0), 0.19, atol=0.05)
 
 
+@pytest.mark.long
 def test_joint_model_tells_an_intermediate_sky(paper_three_skies):
     # an object simulated under the intermediate sky alone (its circumsolar
     # brightening is what a glossy lobe would otherwise be fitted to): the

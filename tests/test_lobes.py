@@ -131,6 +131,7 @@ def _stacked_under_clear_sky(path, lobe="families"):
 @pytest.mark.parametrize(
     ("family", "exponent", "gamma"), [("ward", 200.0, 0.5), ("ggx", 50.0, 0.3)]
 )
+@pytest.mark.long
 def test_stacking_names_the_generating_lobe_family(tmp_path, family, exponent, gamma):
     # 2 % noise on a 16-facet object under a named clear sky: the generating
     # family's PSIS-LOO was 150+ nats above the others' in trials (phong read

@@ -29,6 +29,7 @@ def test_albedo_spread_draw_is_its_conditional():
         assert np.all((draws >= lo) & (draws <= hi))
 
 
+@pytest.mark.long
 def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies):
     # no usable observation: the posterior is the prior, gamma uniform (mean
     # 1/2, 10 % below 0.1), log tau uniform on its range, the day's sun
@@ -50,6 +51,7 @@ def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies
     np.testing.assert_allclose(w.mean(axis=0), 1 / 3, atol=0.06)
 
 
+@pytest.mark.long
 def test_one_material_reads_gloss_albedo_spread_and_clouded_frames(paper_three_skies):
     # one material (gamma 0.3, n 100) whose facets' albedos spread by 10 %,
     # under the intermediate sky, the sun hidden in two frames: the object's

@@ -86,6 +86,7 @@ def test_occluder_albedo_changes_only_the_facets_that_see_the_mesh(bright_faces)
     assert np.all(np.nanmedian(hi.sum(0)[sees] / lo.sum(0)[sees], axis=-1) > 1.04)
 
 
+@pytest.mark.long
 def test_stacking_names_the_albedo_of_the_faces(bright_faces, tmp_path):
     # the forward model's own data, faces at 0.8, 1 % noise: the 0.8 fit must
     # take nearly all the weight (in trials the others were 40+ nats behind),

@@ -40,6 +40,7 @@ def test_loo_stacking_prefers_the_model_that_predicts(tmp_path):
     assert scores["good"]["elpd_loo"] - scores["bad"]["elpd_loo"] == pytest.approx(180, rel=0.01)
 
 
+@pytest.mark.long
 def test_overcast_day_is_told_overcast(tmp_path, capsys):
     # a small bundle made by the forward model under gensky's overcast sky: of
     # the four candidates the overcast fit must carry the weight (a wrong
