@@ -15,7 +15,7 @@ biasing it.
 Stacking weights are not identified among fits whose predictive densities
 are the same: any split of the weight between them is optimal, and the
 optimiser may hand all of it to one (Mitsuba holdout 1, ms16: four lobe
-fits of an overcast day within 1.2 of each other in elpd, gammas 0.11 to
+fits of an overcast day within 0.61 of each other in elpd, gammas 0.11 to
 0.95, Ward given weight 1.00, the object read 0.94 for a true 0.10). With
 ``ties="spread"`` (:func:`spread_tied_weights`) the fits tied with the best
 share their weight evenly, the uniform prior over choices the data do not

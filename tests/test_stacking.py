@@ -118,7 +118,7 @@ def test_fits_tied_with_the_best_share_its_weight():
     def scores(weight, diff):
         return {k: {"weight": w, "elpd_diff": d} for k, w, d in zip("abcd", weight, diff)}
 
-    ms16 = stacking.spread_tied_weights(scores([0.0, 1.0, 0.0, 0.0], [0.24, 0.0, 0.02, 1.2]))
+    ms16 = stacking.spread_tied_weights(scores([0.0, 1.0, 0.0, 0.0], [0.24, 0.0, 0.11, 0.61]))
     assert [ms16[k]["weight"] for k in "abcd"] == [0.25] * 4
     assert ms16["b"]["stacking_weight"] == 1.0 and all(ms16[k]["tied"] for k in "abcd")
     ms05 = stacking.spread_tied_weights(scores([0.0, 0.64, 0.0, 0.36], [3.9, 0.0, 96.0, 71.0]))
