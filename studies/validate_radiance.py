@@ -61,6 +61,7 @@ SETS = {
     "validation_holdout8": "validation_holdout8",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
+    "mitsuba_holdout2": "validation_mitsuba_holdout2",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -93,6 +94,7 @@ ESTIMATES = {
 DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
     "mitsuba_holdout": ("families", "materials"),
+    "mitsuba_holdout2": ("families", "materials"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
