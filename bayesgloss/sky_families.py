@@ -98,6 +98,7 @@ __all__ = [
     "high_k_share",
     "loo_unreliable",
     "equal_when_unreliable",
+    "share_weight",
     "stack_flags",
     "loo_stacking_weights",
     "mixture_draws",
@@ -249,8 +250,18 @@ def equal_when_unreliable(scores: dict) -> dict:
     """
     if not loo_unreliable(high_k_share(scores)):
         return scores
-    equal = 1.0 / len(scores)
-    return {n: {**s, "stacking_weight": s["weight"], "weight": equal} for n, s in scores.items()}
+    return share_weight(scores, scores, 1.0 / len(scores))
+
+
+def share_weight(scores: dict, labels, weight: float) -> dict:
+    """``scores`` with the ``weight`` of each fit in ``labels`` set to
+    ``weight`` and its stacking weight kept as ``stacking_weight``: how a
+    guard that overrides :func:`loo_stacking_weights` records it
+    (:func:`equal_when_unreliable`, :func:`bayesgloss.stacking.spread_tied_weights`)."""
+    return {
+        n: {**s, "stacking_weight": s["weight"], "weight": weight} if n in labels else s
+        for n, s in scores.items()
+    }
 
 
 def mixture_draws(draws: list, weights, rng: np.random.Generator) -> np.ndarray:

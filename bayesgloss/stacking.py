@@ -90,11 +90,8 @@ def spread_tied_weights(scores: dict, tied_elpd: float = TIED_ELPD) -> dict:
     if len(tied) < 2:
         return scores
     share = sum(scores[label]["weight"] for label in tied) / len(tied)
-    out = {label: dict(s, tied=label in tied) for label, s in scores.items()}
-    for label in tied:
-        out[label]["stacking_weight"] = out[label]["weight"]
-        out[label]["weight"] = share
-    return out
+    out = sky_families.share_weight(scores, tied, share)
+    return {label: {**s, "tied": label in tied} for label, s in out.items()}
 
 
 @dataclass
