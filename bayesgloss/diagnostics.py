@@ -32,6 +32,7 @@ __all__ = [
     "long_enough",
     "converged",
     "diagnose",
+    "meets_rule",
     "rank_diagnostics",
     "gamma_convergence",
 ]
@@ -147,9 +148,19 @@ def diagnose(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN):
     if ok.any():
         stats[:, ok] = rank_diagnostics(x[ok])
     rhat, ess_bulk, ess_tail = stats
+    return rhat, ess_bulk, ess_tail, meets_rule(rhat, ess_bulk, ess_tail, rhat_max, ess_min)
+
+
+def meets_rule(rhat, ess_bulk, ess_tail, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN):
+    """The convergence rule of :func:`diagnose` on statistics already
+    computed: R-hat < ``rhat_max`` and bulk and tail ESS >= ``ess_min``
+    (False where a statistic is NaN)."""
     with np.errstate(invalid="ignore"):
-        met = (rhat < rhat_max) & (ess_bulk >= ess_min) & (ess_tail >= ess_min)
-    return rhat, ess_bulk, ess_tail, met
+        return (
+            (np.asarray(rhat) < rhat_max)
+            & (np.asarray(ess_bulk) >= ess_min)
+            & (np.asarray(ess_tail) >= ess_min)
+        )
 
 
 def converged(draws, rhat_max: float = RHAT_MAX, ess_min: float = ESS_MIN) -> np.ndarray:

@@ -31,31 +31,35 @@ from bayesgloss.bundle import read_bundle
 from bayesgloss.estimate import estimate_bundle
 
 
-def _diagnostics(s) -> dict:
+def _diagnostics(s, used) -> dict:
     """One joint run's diagnostics (:class:`bayesgloss.sampling.schedule.JointSamples`):
-    gamma's, then each frame's sun and sky latents'."""
+    gamma's, then each frame's sun and sky latents', each frame named by its
+    index in the bundle (``used``: the run's frames of the bundle's, (T,) of bool)."""
     t = s.frames.shape[2]
     lam = s.frames[..., 1:3]  # (E, S, T, 2): log a (sun), log b (sky)
+
+    def stats(k):
+        return {
+            "rhat": float(s.rhat[k]),
+            "ess_bulk": float(s.ess_bulk[k]),
+            "ess_tail": float(s.ess_tail[k]),
+            "ok": bool(diagnostics.meets_rule(s.rhat[k], s.ess_bulk[k], s.ess_tail[k])),
+        }
+
     return {
         "converged": bool(s.converged),
         "sweeps": int(s.n_sweeps),
         "seconds": float(s.seconds),
-        "gamma": {
-            "rhat": float(s.rhat[0]),
-            "ess_bulk": float(s.ess_bulk[0]),
-            "ess_tail": float(s.ess_tail[0]),
-        },
+        "gamma": stats(0),
         "frames": [
             {
-                latent: {
-                    "rhat": float(s.rhat[1 + j * t + i]),
-                    "ess_bulk": float(s.ess_bulk[1 + j * t + i]),
-                    "ess_tail": float(s.ess_tail[1 + j * t + i]),
-                    "sd": float(lam[..., i, j].std()),
-                }
-                for j, latent in enumerate(("sun", "sky"))
+                "frame": int(f),
+                **{
+                    latent: {**stats(1 + j * t + i), "sd": float(lam[..., i, j].std())}
+                    for j, latent in enumerate(("sun", "sky"))
+                },
             }
-            for i in range(t)
+            for i, f in enumerate(np.flatnonzero(used))
         ],
     }
 
@@ -68,19 +72,11 @@ def _record(runs: dict):
 
     def wrapped(names, *args, **kw):
         fits = real(names, *args, **kw)
-        for name, (_, samples, _used) in fits.items():
-            runs[name] = _diagnostics(samples)
+        for name, (_, samples, used) in fits.items():
+            runs[name] = _diagnostics(samples, used)
         return fits
 
     return real, wrapped
-
-
-def _fails(q: dict) -> bool:
-    return not (
-        q["rhat"] < diagnostics.RHAT_MAX
-        and q["ess_bulk"] >= diagnostics.ESS_MIN
-        and q["ess_tail"] >= diagnostics.ESS_MIN
-    )
 
 
 def breakdown(path, jobs: int = 2) -> dict:
@@ -118,18 +114,20 @@ def main(argv=None):
         out.append(r)
         g = r["object"]["gamma"]
         print(f"{Path(path).name}: gamma {g['median']:.3f}, flags {r['object']['flags']}")
+        elevation = r["sun_elevation_deg"]
         for k, run in r["runs"].items():
             bad = [
-                f"{i}:{latent}(R {q['rhat']:.3f}, ESS {q['ess_bulk']:.0f}/{q['ess_tail']:.0f}, sd {q['sd']:.2f})"
-                for i, fr in enumerate(run["frames"])
+                f"{fr['frame']}:{latent}(sun at {elevation[fr['frame']]:.0f} deg, "
+                f"R {q['rhat']:.3f}, ESS {q['ess_bulk']:.0f}/{q['ess_tail']:.0f}, sd {q['sd']:.2f})"
+                for fr in run["frames"]
                 for latent, q in fr.items()
-                if _fails(q)
+                if latent != "frame" and not q["ok"]
             ]
             gq = run["gamma"]
             print(
                 f"  run {k}: converged {run['converged']}, {run['sweeps']} sweeps, "
                 f"gamma R {gq['rhat']:.3f} ESS {gq['ess_bulk']:.0f}/{gq['ess_tail']:.0f} "
-                f"({'fails' if _fails(gq) else 'passes'}); "
+                f"({'passes' if gq['ok'] else 'fails'}); "
                 f"{len(bad)} of {2 * len(run['frames'])} frame latents fail: {' '.join(bad)}"
             )
     if args.out:
