@@ -30,16 +30,20 @@ def test_albedo_spread_draw_is_its_conditional():
 
 
 @pytest.mark.long
-def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies):
+@pytest.mark.parametrize("exposure_known", [True, False])
+def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies, exposure_known):
     # no usable observation: the posterior is the prior, gamma uniform (mean
     # 1/2, 10 % below 0.1), log tau uniform on its range, the day's sun
-    # weights uniform on the simplex (mean 1/3 each). A missing Jacobian, a
-    # wrong conditional of tau or m, or a move that is not reversible pulls
-    # these off. Tolerances: ~15000 autocorrelated draws, ESS of a few hundred
+    # weights uniform on the simplex (mean 1/3 each), and, with the exposure
+    # unknown, each frame's log exposure N(0, 2^2). A missing Jacobian, a
+    # wrong conditional of tau or m, or a move that is not reversible (the
+    # ridge moves' lattices, the sun's jumps) pulls these off. Tolerances:
+    # ~15000 autocorrelated draws, ESS of a few hundred
     full, up = paper_three_skies
     bases = full.take(slice(0, 5), np.flatnonzero(up)[3:9])
     f, t = bases.diffuse.shape[1:]
-    data = il.joint_data(np.ones((f, t)), np.zeros((f, t), bool), bases, exposure=np.ones(t))
+    exposure = np.ones(t) if exposure_known else None
+    data = il.joint_data(np.ones((f, t)), np.zeros((f, t), bool), bases, exposure=exposure)
     res = sample_material(data, seed=3, min_sweeps=1200, max_sweeps=1200)
     g = res.draws[0, ..., 0].ravel()
     assert abs(g.mean() - 0.5) < 0.06
@@ -49,6 +53,20 @@ def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies
     assert abs((log_tau.mean() - lo) / (hi - lo) - 0.5) < 0.08
     w = np.exp(il.log_sun_weights(res.material)).reshape(-1, 3)
     np.testing.assert_allclose(w.mean(axis=0), 1 / 3, atol=0.06)
+    # each frame's log sun: the mixture at weights uniform on the simplex has
+    # mean (0 - 2.5 - 9) / 3 = -3.83. The mean over frames has sd 2.4 and ESS
+    # ~2700 here (standard error 0.05), so 0.2 is 4 standard errors; its
+    # modes (clear, dimmed, hidden) are 2.5-9 apart, and before the sun's
+    # jumps (stop 41) the frame moves' random walk crossed them so rarely
+    # (ESS 170-340 per frame) that the mean read -4.07 and -3.43. The sun's
+    # jumps mix them: ESS > 2000
+    q = data.frame_priors
+    mean_sun = (0.0 + q.sun_cloud_mean + q.sun_hidden_mean) / 3
+    assert abs(res.frames[..., 1].mean() - mean_sun) < 0.2
+    assert res.ess_bulk[1 : 1 + t].min() > 2000, res.ess_bulk[1 : 1 + t]
+    if not exposure_known:
+        log_e = res.frames[..., 0]
+        assert abs(log_e.mean()) < 0.3 and abs(log_e.std() - q.exposure_sd) < 0.3
 
 
 @pytest.mark.long

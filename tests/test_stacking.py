@@ -116,7 +116,8 @@ def test_fits_tied_with_the_best_share_its_weight():
     # difference of 0.0; spread, the four share it. A fit 4 or more below
     # the best keeps its own stacking weight (ms05: the coating's 0.36)
     def scores(weight, diff):
-        return {k: {"weight": w, "elpd_diff": d} for k, w, d in zip("abcd", weight, diff)}
+        rows = zip("abcd", weight, diff, strict=True)
+        return {k: {"weight": w, "elpd_diff": d} for k, w, d in rows}
 
     ms16 = stacking.spread_tied_weights(scores([0.0, 1.0, 0.0, 0.0], [0.24, 0.0, 0.11, 0.61]))
     assert [ms16[k]["weight"] for k in "abcd"] == [0.25] * 4
