@@ -273,6 +273,20 @@ def _interval(q: dict) -> str:
     return f"{lo:.3f}, {hi:.3f}"
 
 
+def _convergence_line(c: dict) -> str:
+    """What a run flagged ``not-converged`` did not meet: gloss, the frames' light, or both."""
+    g = c["gamma"]
+    gloss = (
+        f"gloss R-hat {g['rhat']:.3f}, ESS {g['ess_bulk']:.0f}/{g['ess_tail']:.0f} (bulk/tail), "
+        + ("meets the rule" if g["meets_rule"] else "short of the rule (R-hat < 1.01, ESS >= 400)")
+    )
+    frames = c["frames_not_converged"]
+    if not frames:
+        return f"not converged: {gloss}"
+    light = f"the sun or sky of frame{'s' if len(frames) > 1 else ''} {', '.join(map(str, frames))}"
+    return f"not converged: {gloss}; {light} short of the rule"
+
+
 def _print_estimate(name, summary) -> None:
     o = summary["object"]
     g = o["gamma"]
@@ -292,6 +306,8 @@ def _print_estimate(name, summary) -> None:
         )
     if o.get("flags"):
         print(f"  object flags: {', '.join(o['flags'])}")
+    if "not-converged" in o.get("flags", ()) and "convergence" in o:
+        print(f"  {_convergence_line(o['convergence'])}")
     if "sky_families" in summary:  # the stacked day-level sky families
         stack = summary["sky_families"]
         fam = stack["families"]

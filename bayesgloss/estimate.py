@@ -104,6 +104,7 @@ from .joint_estimate import (
     bundle_sky,
     frame_summary,
     joint_fit,
+    object_convergence,
     sky_model_summary,
 )
 from .model_error import model_error_sd, with_model_error
@@ -553,7 +554,8 @@ def _summarise(
         "per_frame_illumination": used is not None,
     }
     if used is not None:
-        summary["frames"] = frame_summary(idata, b, used)
+        summary["frames"] = frame_summary(idata, b, used, samples)
+        summary["object"]["convergence"] = object_convergence(samples, used)
         summary["sky_models"] = sky_model_summary(idata)
         post = idata.posterior
         summary["object"]["n"] = _quantiles(post["n_object"].values)

@@ -16,8 +16,8 @@ import contextlib
 
 import numpy as np
 
+from . import diagnostics, sampling, sky
 from . import illumination as il
-from . import sampling, sky
 from ._thirdparty import arviz
 from .fresnel import FRESNEL_COLUMNS
 from .intervals import posterior_quantiles
@@ -43,6 +43,8 @@ __all__ = [
     "joint_fit",
     "add_facet_posteriors",
     "frame_summary",
+    "frame_convergence",
+    "object_convergence",
     "sky_model_summary",
     "posterior_quantiles",
 ]
@@ -289,11 +291,48 @@ def add_facet_posteriors(idata, samples, seed, jobs: int = 1) -> None:
     samples.facets = facet_run
 
 
-def frame_summary(idata, b, used) -> list:
-    """Each frame's inferred sun, sky (relative to the sky model's) and exposure."""
+def frame_convergence(samples, n_frames: int) -> np.ndarray:
+    """Whether each frame's sun and sky latents met the stopping rule
+    (:func:`bayesgloss.diagnostics.meets_rule`), (T,) of bool, from the
+    run's own statistics (:class:`~bayesgloss.sampling.schedule.JointSamples`:
+    ``rhat``, ``ess_bulk``, ``ess_tail`` end with each frame's log a, then
+    each frame's log b)."""
+    k = len(samples.rhat) - 2 * n_frames
+    ok = diagnostics.meets_rule(samples.rhat[k:], samples.ess_bulk[k:], samples.ess_tail[k:])
+    return ok[:n_frames] & ok[n_frames:]
+
+
+def object_convergence(samples, used) -> dict:
+    """What kept a joint run from converging: the object's gamma's R-hat
+    and ESS (the first of the run's statistics) and whether they meet the
+    rule, and the frames (indices in the bundle; ``used`` the run's frames)
+    whose sun or sky did not. A run is flagged ``not-converged`` when
+    either fails; most renders' runs that stop at the cap fail on frames the
+    data barely inform, not on gloss (``studies/README.md``, stop 41)."""
+    frames = np.flatnonzero(used)
+    conv = frame_convergence(samples, len(frames))
+    r, eb, et = (float(x[0]) for x in (samples.rhat, samples.ess_bulk, samples.ess_tail))
+    return {
+        "gamma": {
+            "rhat": r,
+            "ess_bulk": eb,
+            "ess_tail": et,
+            "meets_rule": bool(diagnostics.meets_rule(r, eb, et)),
+        },
+        "frames_not_converged": [int(t) for t in frames[~conv]],
+    }
+
+
+def frame_summary(idata, b, used, samples=None) -> list:
+    """Each frame's inferred sun, sky (relative to the sky model's) and
+    exposure; with the run's ``samples``, whether its sun and sky met the
+    stopping rule (``converged``)."""
+    conv = None if samples is None else frame_convergence(samples, int(np.sum(used)))
     out = []
     for j, t in enumerate(np.flatnonzero(used)):
         entry = {"frame": int(t), "time": b.times[t].isoformat()}
+        if conv is not None:
+            entry["converged"] = bool(conv[j])
         for v in ("sun", "sky", "exposure"):
             if v in idata.posterior:
                 entry[v] = posterior_quantiles(idata.posterior[v].values[..., j])

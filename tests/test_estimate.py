@@ -353,6 +353,10 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     assert abs(np.log(level)) < np.log(1.25), sun
     assert np.all(np.abs(np.log(sun[2:-2] / level)) < np.log(1.4)), sun
     assert s["object"]["model"].startswith("one material")
+    # the run's own convergence, frame by frame, and the object's record of it agree
+    c = s["object"]["convergence"]
+    assert c["frames_not_converged"] == [f["frame"] for f in s["frames"] if not f["converged"]]
+    assert ("not-converged" in s["object"]["flags"]) == (not res.samples.converged)
     # each facet's own sampler converged given the object's light; R-hat across
     # the pooled chains (different illumination draws by design) once flagged
     # every facet of the demo not-converged

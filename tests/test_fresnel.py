@@ -150,7 +150,7 @@ def test_dark_smooth_plastic_needs_the_fresnel_raise(paper_three_skies):
     # and its albedo within 20 %. 1 % noise; a short run (the medians move
     # by less than 0.005 between 600 and 1600 sweeps)
     from bayesgloss.sampling.joint import starting_frames
-    from bayesgloss.sampling.material import starting_material
+    from bayesgloss.sampling.starts import starting_material
 
     full, up = paper_three_skies
     bases = full.take(slice(0, None, 2), up)
@@ -179,7 +179,7 @@ def test_a_dielectric_coating_is_read_with_schlicks_rise(paper_three_skies_schli
     # read the strength near 1, as the Radiance model does on its own data;
     # without a Fresnel term the start takes the rise for gloss (> 0.35)
     from bayesgloss.sampling.joint import starting_frames
-    from bayesgloss.sampling.material import starting_material
+    from bayesgloss.sampling.starts import starting_material
 
     full, up, _ = paper_three_skies_schlick
     bases = full.take(slice(0, None, 2), up)

@@ -27,6 +27,9 @@ runs one problem at a time and its per-step overhead dominates for a
   scheme for the one-material model (shared gamma and n, hierarchical
   albedo: the object's answer), and :func:`facets_given_frames`, each
   facet's own posterior given the object's illumination;
+- :mod:`~bayesgloss.sampling.ridge`: :func:`lattice_shift`, an exact move
+  along a ridge whose conditional only the priors shape (the one-material
+  sampler's scale and exposure ridges);
 - :mod:`~bayesgloss.sampling.material_density` and
   :mod:`~bayesgloss.sampling.hamiltonian`: the one-material model's density
   and gradient in unconstrained coordinates, and Hamiltonian Monte Carlo of

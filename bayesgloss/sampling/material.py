@@ -73,9 +73,9 @@ from .joint import _curve_data_at, _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .posterior import sample_posterior
 from .schedule import JointSamples, run_chain
-from .starts import _reflect
+from .starts import _reflect, _robust_scales, starting_material
 
-__all__ = ["sample_material", "first_check", "starting_material", "facets_given_frames"]
+__all__ = ["sample_material", "first_check", "facets_given_frames"]
 
 #: The one-material sampler's schedule (stop 37): burn-in rounds of 100
 #: sweeps, then the stopping rule checked every 100 sweeps from 400 on. The
@@ -479,54 +479,6 @@ def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
     edge = np.where(mode < lo, lo, hi)
     bad = ~np.isfinite(log_tau) | (c_hi - c_lo <= 0)
     return np.clip(np.where(bad, edge, log_tau), lo, hi)
-
-
-def _robust_scales(s, axis: int = 0, spread: float = 6.0) -> np.ndarray:
-    """Least-squares scales kept within e^+-``spread`` of their median along
-    ``axis`` (the facets): a facet whose noise swamps its curve can have a
-    scale <= 0 by least squares, which a floor at 1e-300 turned into log s =
-    -690, a start no walker left (found on a third of the one-material SBC's
-    prior draws, where sigma reaches 2)."""
-    ok = np.isfinite(s) & (s > 0)
-    log_s = np.log(np.where(ok, s, 1.0))
-    # the median of the positive scales (0 where none is): sorted with the
-    # others pushed to +inf, taken at the middle of each row's positive count
-    count = ok.sum(axis=axis, keepdims=True)
-    ordered = np.sort(np.where(ok, log_s, np.inf), axis=axis)
-    middle = np.take_along_axis(ordered, np.maximum(count - 1, 0) // 2, axis=axis)
-    mid = np.where(count > 0, middle, 0.0)
-    log_s = np.where(ok, np.clip(log_s, mid - spread, mid + spread), mid)
-    return np.exp(log_s)
-
-
-def starting_material(data: il.JointData, lam) -> tuple[float, float, np.ndarray]:
-    """One material's best (gamma, log n) on a grid given the frames ``lam``
-    (T, L), and each facet's log s at it, (F,): weighted least squares of
-    every facet's scale at each (gamma, exponent node), the pair with the
-    smallest total weighted residual kept."""
-    f, t = data.shape
-    n = len(data.log_n_grid)
-    gam = np.linspace(0.0, 1.0, 41)
-    th = np.zeros((1, f, n, 3))
-    th[..., 1] = data.log_n_grid[None, None, :]
-    mus = []
-    for g in (0.0, 1.0):
-        th[..., 0] = g
-        mus.append(il.predict(th, lam[None, None].repeat(n, 1), data)[0])  # (F, N, T)
-    w = data.relative_weights
-    best, best_r = (0.5, data.log_n_grid[n // 2], data.log_s_center.copy()), np.inf
-    for g in gam:
-        mu = (1 - g) * mus[0] + g * mus[1]  # (F, N, T)
-        num = np.sum(w[:, None] * data.y[:, None] * mu, -1)
-        den = np.maximum(np.sum(w[:, None] * mu * mu, -1), 1e-300)
-        s = _robust_scales(num / den)
-        r = np.sum(w[:, None] * (data.y[:, None] - s[..., None] * mu) ** 2, -1).sum(0)  # (N,)
-        j = int(np.argmin(r))
-        if r[j] < best_r:
-            best_r = r[j]
-            best = (float(g), float(data.log_n_grid[j]), np.log(s[:, j]))
-    g, log_n, log_s = best
-    return min(max(g, 0.01), 0.99), log_n, log_s
 
 
 def sample_material(
