@@ -411,6 +411,14 @@ def table(scores: list[dict]) -> dict:
                     ]
                     if held:
                         e[f"coverage90_{name}_direct_sun"] = float(np.mean(held))
+                # confident misses: the truth outside a reported interval narrower than 0.5
+                e["confident_misses_direct_sun"] = [
+                    s["bundle"][:4]
+                    for s in sun
+                    if m in s
+                    and not _holds(s[m], s["truth"])
+                    and np.ptp(reported_interval(s[m])) < 0.5
+                ]
                 tails = [s[m]["q05"] <= s["truth"] <= s[m]["q95"] for s in sun if m in s]
                 e["coverage90_equal_tailed_direct_sun"] = float(np.mean(tails)) if tails else None
                 over = [s for s in rows if not s["direct_sun"] and m in s]
