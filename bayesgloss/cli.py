@@ -198,10 +198,14 @@ def _baseline(args: argparse.Namespace) -> int:
         print(json.dumps(res.to_json(), indent=2))
         return 0
     print(f"{args.bundle}: peak-frame baseline (Love & Efford), Phong n = {args.exponent:g}")
-    print(
-        f"object gloss (mean over {int(np.sum(res.direct_sun & np.isfinite(res.gloss)))} "
-        f"facets with direct sun): {res.object_gloss:.3f}"
-    )
+    used = int(np.sum(res.direct_sun & np.isfinite(res.gloss)))
+    if used:
+        print(f"object gloss (mean over {used} facets with direct sun): {res.object_gloss:.3f}")
+    else:
+        print(
+            "object gloss: none (no facet has direct sun at its peak frame, and the "
+            "peak-frame method reads gloss from the sun's highlight; try bayesgloss estimate)"
+        )
     print(f"{'facet':>6} {'gamma':>6}  {'peak frame':>10}  flags")
     for i, g, pk, fl in zip(res.ids, res.gloss, res.observed_peak, res.flags, strict=True):
         gs = "   -  " if not np.isfinite(g) else f"{g:6.3f}"

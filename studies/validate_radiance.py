@@ -391,8 +391,12 @@ def table(scores: list[dict]) -> dict:
         sun = [s for s in rows if s["direct_sun"]]
         entry = {"sequences": len(rows), "direct_sun": len(sun)}
         for m in methods_run(scores):
+            # the baseline has no answer where no facet has the sun at its peak (NaN)
             err = [abs(s[m]["median"] - s["truth"]) for s in sun if m in s]
+            err = [x for x in err if np.isfinite(x)]
             e = {"mae_direct_sun": float(np.mean(err)) if err else None}
+            if m == "baseline":
+                e["answered"] = len(err)
             if m != "baseline":
                 cover = [_holds(s[m], s["truth"]) for s in sun if m in s]
                 e["coverage90_direct_sun"] = float(np.mean(cover)) if cover else None

@@ -431,3 +431,30 @@ def test_kill_9_during_estimate_out_leaves_a_result_or_says_it_is_incomplete(
     assert code == 0, err
     assert sorted(p.name for p in out.iterdir()) == ["posterior.nc", "summary.json"]
     assert b"newer" in (out / "posterior.nc").read_bytes()
+
+
+def test_baseline_without_sun_says_so_not_nan(monkeypatch, capsys):
+    # an overcast or hazy day where no facet has the sun at its peak frame
+    # (holdout 8's vs09 printed "object gloss ...: nan"): the line says there
+    # is no answer and why, and the JSON has null
+    import numpy as np
+
+    from bayesgloss import baseline
+
+    res = baseline.BaselineResult(
+        ids=np.array([2, 3]),
+        gloss=np.full(2, np.nan),
+        interval=np.full((2, 2), np.nan),
+        flags=[["no-direct-sun"], ["no-direct-sun"]],
+        object_gloss=float("nan"),
+        observed_peak=np.array([4, 4]),
+        predicted_peak=np.full((3, 2), -1),
+        gloss_grid=np.linspace(0, 1, 3),
+        exponent=2.0,
+        direct_sun=np.zeros(2, bool),
+    )
+    monkeypatch.setattr(baseline, "bundle_peak_frame_gloss", lambda *a, **k: res)
+    assert cli.main(["baseline", "any-bundle"]) == 0
+    out = capsys.readouterr().out
+    assert "object gloss: none" in out and "nan" not in out
+    assert res.to_json()["object"]["gamma"] is None
