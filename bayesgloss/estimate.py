@@ -444,7 +444,7 @@ def estimate_bundle(
         out.summary["object"]["flags"] += sky_families.stack_flags(families)
     if part is not None:  # each choice's weight, LOO and own gloss
         out.summary[part[0]] = part[1]
-        if not info["stacked"]:  # the sky not identified: the default choice alone
+        if not info["stacked"]:  # the default choice alone (fit_stacked: why)
             out.summary["object"]["flags"].append(f"{what.replace(' ', '-')}-not-stacked")
     return out
 

@@ -14,6 +14,11 @@ instead of biasing it. Families tied with the best (PSIS-LOO elpd within
 (:func:`bayesgloss.stacking.spread_tied_weights`): on an overcast day the
 lobe's family and the gloss trade off, and stacking alone once gave one of
 four equally predictive fits all the weight (stop 40, Mitsuba holdout 1).
+Where the day's sky is an overcast one the lobe families are not stacked
+at all: Phong alone answers, flagged ``lobe-family-not-stacked`` (stop 41:
+with its fits tied and spread, ``materials`` still failed holdout 8's
+overcast rule by one sunless day; ``sunless_default`` of
+:func:`bayesgloss.stacking.fit_stacked`).
 
 The sky is chosen first (:func:`bayesgloss.stacking.fit_stacked`): with
 ``illumination="families"`` the sky families are stacked with the Phong
@@ -145,6 +150,7 @@ def fit_lobe_families(
         default="phong",
         attribute="lobe_family",
         ties="spread",
+        sunless_default=True,
         progress=progress,
         jobs=jobs,
         **sky_options,

@@ -149,7 +149,8 @@ class StackedFits:
     def record(self, key: str, entries: dict, best_key: str, best) -> dict:
         """The wrappers' ``info``: ``entries`` under ``key``, the most-weighted
         choice under ``best_key``, ``seconds``, ``stacked`` (False where the
-        sky was not identified and the default choice was fitted alone), and
+        default choice was fitted alone: the sky not identified, or, with
+        ``sunless_default``, an overcast one), and
         ``sky_families`` where stacked."""
         info = {key: entries, best_key: best, "seconds": self.seconds}
         info["stacked"] = len(self.own) > 1
@@ -202,6 +203,7 @@ def fit_stacked(
     overcast_variants=False,
     unreliable_loo="equal",
     ties="stacking",
+    sunless_default=False,
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
 
@@ -234,6 +236,15 @@ def fit_stacked(
     ties : {"stacking", "spread"}
         The stacking weights as they are, or with the choices tied with the
         best sharing their weight (:func:`spread_tied_weights`).
+    sunless_default : bool
+        Fit the default choice alone (not stacked) where the day's sky is an
+        overcast one (the most-weighted sky family, or the named sky, of
+        :data:`bayesgloss.sky_families.OVERCAST_GROUP`): for the glossy
+        lobe's family, which only the sun's highlight tells. On sunless days
+        the lobe fits predict alike and their gloss trades off with the
+        lobe's shape: the lobe stack read 0.94 [0.79, 1.00] for a true 0.10
+        (Mitsuba holdout 1, ms16) and 0.054 [0, 0.15] for a true 0 where
+        Phong alone read 0.012 (holdout 8, vs18; ``studies/README.md``).
     """
     if ties not in TIES:
         raise ValueError(f"unknown ties {ties!r}; valid: {', '.join(TIES)}")
@@ -260,11 +271,14 @@ def fit_stacked(
         sky_info = first[3]
         seconds += sky_info.pop("seconds")
         others = {label: opts(label) for label in labels if label != default}
-        if sky_info.get("equal_weights"):  # the sky not identified: the default alone
+        sunless = sunless_default and sky_info["most_weight"] in sky_families.OVERCAST_GROUP
+        if sky_info.get("equal_weights") or sunless:  # the default alone
             labels, others = [default], {}
         fits = {default: first[:3]}
         fits.update(_fit_each(args, sky_info["most_weight"], seed, options, others, progress, jobs))
     else:
+        if sunless_default and illumination in sky_families.OVERCAST_GROUP:
+            labels = [default]
         fits = _fit_each(
             args, illumination, seed, options, {k: opts(k) for k in labels}, progress, jobs
         )

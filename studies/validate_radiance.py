@@ -59,9 +59,11 @@ SETS = {
     "validation_holdout6": "validation_holdout6",
     "validation_holdout7": "validation_holdout7",
     "validation_holdout8": "validation_holdout8",
+    "validation_holdout9": "validation_holdout9",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
+    "mitsuba_holdout3": "validation_mitsuba_holdout3",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -95,11 +97,13 @@ DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
     "mitsuba_holdout": ("families", "materials"),
     "mitsuba_holdout2": ("families", "materials"),
+    "mitsuba_holdout3": ("families", "materials"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
     "validation_holdout7": ("baseline", "fixed", "families", "shadow"),
     "validation_holdout8": ("baseline", "families", "materials"),
+    "validation_holdout9": ("baseline", "families", "materials"),
 }
 
 

@@ -87,6 +87,44 @@ def test_a_sky_not_identified_leaves_the_part_unstacked(monkeypatch):
     assert stacked.record("k", {}, "b", stacked.best)["stacked"] is True
 
 
+def test_a_sunless_day_leaves_the_lobes_unstacked(monkeypatch):
+    # with sunless_default (the lobe families'), a day whose most-weighted
+    # sky family is an overcast one, or a named overcast sky, is answered by
+    # the default lobe alone: no other lobe is fitted (holdout 8's vs18, a
+    # true 0 read 0.054 by the lobe stack and 0.012 by Phong). Without it,
+    # and on a sun-lit day with it, every lobe is fitted and stacked
+    import arviz as az
+
+    def fake_families(*args, **kwargs):
+        post = {"gamma_object": np.full((2, 50), 0.2), "n_object": np.ones((2, 50))}
+        idata = az.from_dict(posterior=post, log_likelihood={"y": np.full((2, 50, 3, 4), -6.0)})
+        idata.posterior.attrs.update(
+            sky_family_weights="{}", sky_family_most_weight=sky, sky_family_equal_weights=0
+        )
+        samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+        return idata, samples, None, {"most_weight": sky, "equal_weights": False, "seconds": 1.0}
+
+    monkeypatch.setattr(sky_families, "fit_families", fake_families)
+    calls = _fake_fits(monkeypatch, {"ward": -1.0}, spread=0.05)
+    kw = dict(option="lobe_family", default="phong", attribute="lobe_family")
+    choices = {"phong": "phong", "ward": "ward", "ggx": "ggx"}
+    args = (*(None,) * 6, "families", 0, {})
+    sky = "gensky-overcast"
+    alone = stacking.fit_stacked(*args, choices=choices, sunless_default=True, **kw)
+    assert calls == [] and list(alone.own) == ["phong"]
+    assert alone.record("k", {}, "b", alone.best)["stacked"] is False
+    stacked = stacking.fit_stacked(*args, choices=choices, **kw)  # the guard off
+    assert calls == ["ward", "ggx"] and stacked.best == "ward"
+    calls.clear()
+    sky = "gensky-clear"
+    sunlit = stacking.fit_stacked(*args, choices=choices, sunless_default=True, **kw)
+    assert calls == ["ward", "ggx"] and len(sunlit.own) == 3
+    calls.clear()
+    named = (*(None,) * 6, "gensky-overcast", 0, {})
+    alone = stacking.fit_stacked(*named, choices=choices, sunless_default=True, **kw)
+    assert calls == ["phong"] and list(alone.own) == ["phong"]
+
+
 def test_the_sky_options_reach_the_sky_families_under_a_second_stack(tmp_path, monkeypatch):
     # --lobe families (and the stacked occluder albedo, the default with a
     # mesh) stacks the sky families first: --unreliable-loo and
