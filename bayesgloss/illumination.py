@@ -102,6 +102,7 @@ __all__ = [
     "pointwise_log_likelihood",
     "sample_prior",
     "sample_prior_material",
+    "draw_log_sun",
     "simulate",
     "LATENTS",
     "latent_names",
@@ -871,15 +872,25 @@ def sample_prior_material(
     th[..., 3] = rng.uniform(*p.log_sigma, size)[None, :]  # one sigma for all facets
     weights = rng.dirichlet(np.ones(3), size=size)  # clear, dimmed, hidden
     hyper[:, 2:] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
-    state = (rng.random((size, t, 1)) > np.cumsum(weights, axis=1)[:, None, :]).sum(-1)
-    hidden_mean = -np.inf if point_mass else q.sun_hidden_mean
-    means = np.array([0.0, q.sun_cloud_mean, hidden_mean])
-    sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])
-    lam[..., 1] = means[state] + sds[state] * rng.standard_normal((size, t))
+    lam[..., 1] = draw_log_sun(weights, t, q, rng, point_mass)
     if data.fresnel is not None:  # k and log A, shared by the facets
         fres = fr.sample_prior_fresnel(size, rng)
         th = np.concatenate([th, np.broadcast_to(fres[None], (f, size, 2))], axis=-1)
     return th, hyper, lam
+
+
+def draw_log_sun(weights, frames: int, q: IlluminationPriors, rng, point_mass: bool = False):
+    """Each frame's log sun drawn from the day's three-part mixture
+    (:func:`log_prior_frames`), (..., frames), for the weights of its clear,
+    dimmed and hidden components (..., 3) (``point_mass``: a hidden sun
+    log a = -inf). The prior's draws (:func:`sample_prior_material`) and the
+    one-material sampler's proposals (its sun's jumps) both."""
+    u = rng.random((*weights.shape[:-1], frames))
+    state = (u[..., None] > np.cumsum(weights, axis=-1)[..., None, :-1]).sum(-1)
+    hidden_mean = -np.inf if point_mass else q.sun_hidden_mean
+    means = np.array([0.0, q.sun_cloud_mean, hidden_mean])
+    sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])
+    return means[state] + sds[state] * rng.standard_normal(state.shape)
 
 
 def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarray:

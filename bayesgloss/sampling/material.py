@@ -388,14 +388,9 @@ class _MaterialChain(_JointChain):
         6200-7400. Where a frame's sun is cut off by very precise data the
         prior's draws are mostly refused and it stays slow (ESS 90-210;
         ``studies/README.md``, stop 41)."""
-        rng, q = self.rng, self.data.frame_priors
-        w = np.exp(il.log_sun_weights(self.hyper))  # (E, W, 3)
-        u = rng.random(self.lam.shape[:-1])  # (E, W, T)
-        k = (u[..., None] > np.cumsum(w, -1)[:, :, None, :-1]).sum(-1)
-        means = np.array([0.0, q.sun_cloud_mean, q.sun_hidden_mean])[k]
-        sds = np.array([q.sun_clear_sd, q.sun_cloud_sd, q.sun_hidden_sd])[k]
+        rng, w = self.rng, np.exp(il.log_sun_weights(self.hyper))  # (E, W, 3)
         prop = self.lam.copy()
-        prop[..., 1] = means + sds * rng.standard_normal(k.shape)
+        prop[..., 1] = il.draw_log_sun(w, self.t, self.data.frame_priors, rng)
         cur = il.frame_log_likelihood(th, self.lam, log_sigma, self.data, parts)
         new = il.frame_log_likelihood(th, prop, log_sigma, self.data, parts)
         ok = np.log(rng.random(new.shape)) < new - cur
