@@ -31,7 +31,6 @@ import time
 import numpy as np
 
 from bayesgloss import illumination as il
-from bayesgloss import likelihood as lk
 from bayesgloss.joint_estimate import JOINT_MAX_SWEEPS
 from bayesgloss.pool import process_pool
 from bayesgloss.sampling import sample_material
@@ -42,23 +41,10 @@ FACETS, FRAMES = 24, 12
 @functools.lru_cache(maxsize=2)
 def design(exposure_known: bool):
     """The reference data: ``FACETS`` facets and ``FRAMES`` sun-up frames of
-    the paper scene under the ``auto`` mixture (as ``sbc_material.py``'s)."""
-    from sbc_material import paper_three_skies
+    the paper scene under the ``auto`` mixture (``sbc_material.py``'s design)."""
+    from sbc_material import paper_three_skies, sbc_design
 
-    full, up = paper_three_skies()
-    sun_up = np.flatnonzero(up)[1:-1]
-    pick_t = sun_up[np.linspace(0, len(sun_up) - 1, FRAMES).round().astype(int)]
-    pick_f = np.linspace(0, full.diffuse.shape[1] - 1, FACETS).round().astype(int)
-    bases = full.take(pick_f, pick_t)
-    f, t = bases.diffuse.shape[1:]
-    ref = il.joint_data(
-        np.ones((f, t)),
-        np.ones((f, t), bool),
-        bases,
-        exposure=np.ones(t) if exposure_known else None,
-        priors=lk.Priors(log_s_center=0.0),
-    )
-    return dataclasses.replace(ref, floor=0.01 * bases.total().diffuse.max(axis=1))
+    return sbc_design(paper_three_skies(), FACETS, FRAMES, exposure_known=exposure_known)
 
 
 def fit_object(seed: int, index: int) -> dict:

@@ -58,11 +58,18 @@ def paper_three_skies(lobe_family: str = "phong"):
     return il.illumination_bases(g, seq.sky, others=others, lobe_family=lobe_family), up
 
 
-def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8, fresnel: str = "none"):
+def sbc_design(
+    paper_three_skies,
+    facets: int = 12,
+    frames: int = 8,
+    fresnel: str = "none",
+    exposure_known: bool = True,
+):
     """The reference data of the SBC objects: ``facets`` facets spread over the
     paper scene's, ``frames`` sun-up frames spread over the day, a fixed prior
     centre of log s and a fixed noise floor (so the likelihood fitted is the
-    one simulated); ``fresnel`` the Fresnel model (:mod:`bayesgloss.fresnel`)."""
+    one simulated); ``fresnel`` the Fresnel model (:mod:`bayesgloss.fresnel`);
+    ``exposure_known`` False: each frame's exposure inferred."""
     full, up = paper_three_skies
     sun_up = np.flatnonzero(up)[1:-1]
     pick_t = sun_up[np.linspace(0, len(sun_up) - 1, frames).round().astype(int)]
@@ -73,7 +80,7 @@ def sbc_design(paper_three_skies, facets: int = 12, frames: int = 8, fresnel: st
         np.ones((f, t)),
         np.ones((f, t), bool),
         bases,
-        exposure=np.ones(t),
+        exposure=np.ones(t) if exposure_known else None,
         priors=lk.Priors(log_s_center=0.0),
         fresnel=fresnel,
     )
