@@ -257,6 +257,7 @@ def _estimate(args: argparse.Namespace) -> int:
         overcast_variants=args.overcast_variants,
         unreliable_loo=args.unreliable_loo or "equal",
         ground_shadow=args.ground_shadow,
+        clipped=args.clipped,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -390,6 +391,7 @@ def _estimate_many(args, progress) -> int:
                 **({"overcast_variants": True} if args.overcast_variants else {}),
                 **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
                 **({"ground_shadow": args.ground_shadow} if args.ground_shadow else {}),
+                **({"clipped": args.clipped} if args.clipped else {}),
                 "bundle_content": content,
             },
         )
@@ -552,7 +554,7 @@ def _parser() -> argparse.ArgumentParser:
     from . import sky
     from .fresnel import FRESNEL_MODELS
     from .ground_facing import DEFAULT_GROUND_FACING, GROUND_FACING_MODES, GROUND_FACING_NZ
-    from .joint_estimate import DEFAULT_FRESNEL
+    from .joint_estimate import CLIPPED, DEFAULT_FRESNEL
     from .lobes import LOBE_FAMILIES
     from .object_shadow import GROUND_SHADOWS
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
@@ -709,6 +711,14 @@ def _parser() -> argparse.ArgumentParser:
         choices=GROUND_SHADOWS,
         help="without an object_mesh: the ground sunlit everywhere (default 'none'), or "
         "shadowed by the convex object the facets bound ('convex'; bayesgloss.object_shadow)",
+    )
+    es.add_argument(
+        "--clipped",
+        default=None,
+        choices=CLIPPED,
+        help="per-frame illumination: facet values whose pixels clipped at the top code "
+        "left out (default 'drop'), or kept as lower bounds ('likelihood'; "
+        "bayesgloss.sampling.censored)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

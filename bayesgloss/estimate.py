@@ -33,23 +33,12 @@ answers the data did not hold).
 
 With fixed brightness (``per_frame=False``; the facets sampled on their own,
 :mod:`bayesgloss.facets_estimate`), object-level gloss, beside the
-paper's average of facets:
-
-- ``population``: a hierarchical model, facet gammas drawn from a Beta
-  population of mean mu and concentration kappa, fitted by reweighting the
-  facet posteriors, which were sampled under a uniform prior on gamma (Hogg,
-  Myers & Bovy 2010, eq. 11): p(mu, kappa | data) is proportional to
-  p(mu, kappa) prod_f int Beta(g; mu kappa, (1 - mu) kappa) p_f(g) dg, p_f a
-  kernel density of facet f's draws with a bandwidth set by their effective
-  sample size (:func:`bayesgloss.pooling.population_gloss`), a two-parameter density
-  integrated on a grid. The object's gloss is mu. Priors: mu uniform on
-  [0, 1], log kappa uniform on [log 0.5, log 1e4].
-- ``shared``: one material, all facets with the same gamma and n (and their
-  own scale and noise): the product of the facets' marginal posteriors of
-  (gamma, log n) divided by the prior F - 1 times, evaluated on a grid with a
-  kernel density estimate of each facet's draws.
-- ``mean``: the mean over facets of their posterior medians (the paper's
-  average, for comparison).
+paper's average of facets: ``population`` (partial pooling, a Beta
+population of facet gammas whose mean mu is the object's gloss; priors mu
+uniform on [0, 1], log kappa uniform on [log 0.5, log 1e4]) and ``shared``
+(complete pooling: one gamma and n), both :mod:`bayesgloss.pooling`'s on a
+grid from kernel densities of the facets' draws; ``mean``, the mean over
+facets of their posterior medians (the paper's average, for comparison).
 
 Illumination models (``illumination=``, :data:`ILLUMINATION_MODELS`): the
 sky models of :func:`bayesgloss.sky.sky_models` (``"point-sun"``, the
@@ -99,9 +88,11 @@ from .intervals import GAMMA_BOUNDS, reported_interval
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
+    DEFAULT_CLIPPED,
     DEFAULT_FRESNEL,
     DEFAULT_LOBE_FAMILY,
     bundle_sky,
+    check_clipped,
     frame_summary,
     joint_fit,
     object_convergence,
@@ -239,6 +230,7 @@ def estimate_bundle(
     overcast_variants: bool = False,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
+    clipped: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -313,6 +305,10 @@ def estimate_bundle(
         ground sunlit everywhere, or the shadow of the convex object its
         facets bound (:mod:`bayesgloss.object_shadow`); default
         :data:`bayesgloss.object_shadow.DEFAULT_GROUND_SHADOW`.
+    clipped : {"drop", "likelihood"}, optional
+        Entries clipped at the top code: left out of the joint model, or
+        lower bounds (:mod:`bayesgloss.sampling.censored`); default
+        :data:`bayesgloss.joint_estimate.DEFAULT_CLIPPED`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -349,9 +345,11 @@ def estimate_bundle(
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
     if shadow != DEFAULT_GROUND_SHADOW and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")
+    clipped = check_clipped(clipped or DEFAULT_CLIPPED)
     if joint:
         sampler_options["fresnel"] = fresnel
         sampler_options["ground_shadow"] = shadow
+        sampler_options["clipped"] = clipped
         if not lobe_stacked:
             sampler_options["lobe_family"] = lobe
     if occluder_albedo is None:  # the lobe families' stack keeps the faces at one albedo
@@ -599,6 +597,7 @@ def estimate_unit(
     overcast_variants: bool = False,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
+    clipped: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -610,7 +609,7 @@ def estimate_unit(
     whose frames were replaced is a new unit, not a finished one); a bundle
     changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
     ``ground_facing``, ``overcast_variants``, ``unreliable_loo`` and
-    ``ground_shadow``: as :func:`estimate_bundle`'s
+    ``ground_shadow`` and ``clipped``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -636,5 +635,6 @@ def estimate_unit(
         overcast_variants=overcast_variants,
         unreliable_loo=unreliable_loo,
         ground_shadow=ground_shadow,
+        clipped=clipped,
     )
     return result_files(res)

@@ -316,6 +316,12 @@ class JointData:
         Where set, the one-material model's glossy basis has Radiance's
         Fresnel raise with an unknown strength and albedo (theta's columns
         :data:`bayesgloss.fresnel.FRESNEL_COLUMNS`); None: no Fresnel term.
+    censored : ndarray (F, T) of bool, or None
+        Valid entries whose ``y`` is only a lower bound of the value (pixels
+        clipped at the top code, :func:`bayesgloss.estimate.observations`):
+        their likelihood is the noise's survival function at the bound
+        (:func:`pointwise_log_likelihood`; the sampler's,
+        :mod:`bayesgloss.sampling.censored`). None: no such entry.
     """
 
     y: np.ndarray
@@ -331,6 +337,7 @@ class JointData:
     shapes: int = 1
     log_sun_ratio: np.ndarray | None = None
     fresnel: fr.FresnelTerms | None = None
+    censored: np.ndarray | None = None
 
     @property
     def sources(self) -> int:
@@ -420,6 +427,7 @@ def joint_data(
     priors: lk.Priors | None = None,
     frame_priors: IlluminationPriors | None = None,
     fresnel: str = "none",
+    censored=None,
 ) -> JointData:
     """Assemble the joint model's inputs.
 
@@ -438,6 +446,8 @@ def joint_data(
         :class:`IlluminationPriors`).
     fresnel : {"none", "radiance", "schlick"}
         The one-material model's Fresnel model (:data:`bayesgloss.fresnel.FRESNEL_MODELS`).
+    censored : array_like (F, T) of bool, optional
+        Entries of ``valid`` whose ``y`` is a lower bound (:attr:`JointData.censored`).
     """
     fr.check_fresnel_model(fresnel)
     if fresnel != "none" and bases.fresnel is None:
@@ -460,6 +470,10 @@ def joint_data(
         if e.shape != (y.shape[1],) or not np.all(np.isfinite(e) & (e > 0)):
             raise ValueError(f"exposure must be T = {y.shape[1]} positive numbers, got {e}")
         log_e = np.log(e) - np.mean(np.log(e))
+    cens = None if censored is None else np.asarray(censored, dtype=bool)
+    if cens is not None and cens.shape != valid.shape:
+        raise ValueError(f"censored must have the shape of y, {valid.shape}, got {cens.shape}")
+    cens = None if cens is None else cens & valid
     return JointData(
         y0,
         valid,
@@ -474,6 +488,7 @@ def joint_data(
         bases.shapes,
         bases.log_sun_ratio,
         bases.fresnel if fresnel != "none" else None,
+        cens if cens is not None and cens.any() else None,
     )
 
 
@@ -710,13 +725,16 @@ def predict(theta, lam, data: JointData, parts=None) -> np.ndarray:
     return np.exp(theta[..., 2:3]) * mu
 
 
-def _residuals(mu, data: JointData, axis=None):
+def _residuals(mu, data: JointData, axis=None, y=None):
     """(z', log v): (y - mu) / (mu + c) and log(mu + c), 0 where invalid;
-    with ``axis``, log v summed over it (the likelihoods need only sums)."""
+    with ``axis``, log v summed over it (the likelihoods need only sums).
+    ``y``: each walker's own observations, (E, F, W, T) (censored entries
+    completed, :mod:`bayesgloss.sampling.censored`); default the data's."""
     v = mu + data.floor[None, :, None, None]
     valid = data.valid[None, :, None, :]
+    y = data.y[None, :, None, :] if y is None else y
     with np.errstate(invalid="ignore", divide="ignore"):
-        z = np.where(valid, (data.y[None, :, None, :] - mu) / v, 0.0)
+        z = np.where(valid, (y - mu) / v, 0.0)
         if axis is None:
             return z, np.where(valid, np.log(np.maximum(v, 1e-300)), 0.0)
         return z, _sum_log(np.where(valid, v, 1.0), axis)
@@ -752,7 +770,7 @@ def log_likelihood_sigma_marginal(theta, lam, data: JointData, parts=None, with_
     return (ll, q) if with_q else ll
 
 
-def log_likelihood_shared_sigma(theta, lam, data: JointData, parts=None, with_q=False):
+def log_likelihood_shared_sigma(theta, lam, data: JointData, parts=None, with_q=False, y=None):
     """The one-material model's log likelihood with one sigma for all facets
     integrated out, (E, W).
 
@@ -766,8 +784,9 @@ def log_likelihood_shared_sigma(theta, lam, data: JointData, parts=None, with_q=
     exactly, and the sampler's walkers each sat on their own (gamma's R-hat
     over walkers 2-10 on 24-facet, 12-frame prior draws; one sigma, no facet
     can be fitted alone). With ``with_q``, also each facet's Q (E, F, W).
+    ``y``: each walker's completed observations (:func:`_residuals`).
     """
-    z, sum_log_v = _residuals(predict(theta, lam, data, parts), data, axis=(1, -1))
+    z, sum_log_v = _residuals(predict(theta, lam, data, parts), data, axis=(1, -1), y=y)
     q_f = np.sum(z * z, axis=-1)
     q = np.maximum(q_f.sum(axis=1), 1e-300)
     k, const, cuts = data.shared_sigma_constants
@@ -817,12 +836,16 @@ def frame_log_likelihood(theta, lam, log_sigma, data: JointData, parts) -> np.nd
 
 def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
     """Log likelihood of every (facet, frame), (E, F, W, T), theta with log
-    sigma as its 4th coordinate; NaN where invalid."""
+    sigma as its 4th coordinate; NaN where invalid. A censored entry's is
+    the probability that the value is at least its bound, log Phi((mu - y)
+    / sd) (the likelihood of what was observed: the pixel clipped)."""
     mu = predict(theta, lam, data)
     z, log_v = _residuals(mu, data)
     log_sigma = theta[..., 3:4]
     z = z * np.exp(-log_sigma)
     ll = -0.5 * z * z - log_v - log_sigma - 0.5 * np.log(2 * np.pi)
+    if data.censored is not None:
+        ll = np.where(data.censored[None, :, None, :], special.log_ndtr(-z), ll)
     return np.where(data.valid[None, :, None, :], ll, np.nan)
 
 
@@ -898,4 +921,8 @@ def simulate(theta, lam, data: JointData, rng: np.random.Generator) -> np.ndarra
     sigma, lam (E, W, T, L)."""
     mu = predict(theta, lam, data)
     sd = np.exp(theta[..., 3:4]) * (mu + data.floor[None, :, None, None])
-    return mu + sd * rng.standard_normal(mu.shape)
+    y = mu + sd * rng.standard_normal(mu.shape)
+    if data.censored is not None:  # clipped where the data were: at most the bound
+        cut = data.censored[None, :, None, :]
+        y = np.where(cut, np.minimum(y, data.y[None, :, None, :]), y)
+    return y

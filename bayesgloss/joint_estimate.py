@@ -62,6 +62,14 @@ DEFAULT_FRESNEL = "none"
 #: The glossy lobe's family where none is named (:data:`bayesgloss.lobes.LOBE_FAMILIES`).
 DEFAULT_LOBE_FAMILY = "phong"
 
+#: How the joint model takes entries whose pixels clipped at the top code
+#: (censored: only a lower bound known): ``"drop"`` leaves them out (the
+#: model until stop 42: biased where the clipped entries are the glossy
+#: peaks), ``"likelihood"`` keeps them with the noise's survival function at
+#: the bound (:mod:`bayesgloss.sampling.censored`).
+CLIPPED = ("drop", "likelihood")
+DEFAULT_CLIPPED = "drop"
+
 #: Sweeps at most of the joint sampler where no ``max_steps`` is given (the
 #: run stops earlier once converged; otherwise it is flagged ``not-converged``).
 JOINT_MAX_SWEEPS = 2000
@@ -96,6 +104,7 @@ def joint_inputs(
     lobe_family=DEFAULT_LOBE_FAMILY,
     occluder_albedo=None,
     ground_shadow=DEFAULT_GROUND_SHADOW,
+    clipped=DEFAULT_CLIPPED,
 ):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` and the frames any of them sees with the sun
@@ -105,14 +114,18 @@ def joint_inputs(
     ``occluder_albedo`` (default :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`;
     :mod:`bayesgloss.occluder_albedo`), and for one without, the object's
     shadow on the ground where ``ground_shadow`` is ``"convex"``
-    (:mod:`bayesgloss.object_shadow`): (data, frames used (T,) of bool, sky
-    model names)."""
+    (:mod:`bayesgloss.object_shadow`), and the clipped entries left out or
+    kept as censored (``clipped``, :data:`CLIPPED`): (data, frames used (T,)
+    of bool, sky model names)."""
+    clipped = check_clipped(clipped)
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
     ground = "sky" if illumination == "point-sun" else "plane"
-    ok = usable[keep] & ~censored[keep]  # censored entries are left out of the joint model
+    ok = usable[keep] & ~censored[keep]  # measured entries
     used = ok.any(axis=0) & b.sun_up
+    if clipped == "likelihood":  # and the clipped ones, as lower bounds
+        ok = usable[keep]
     geometry = b.view_geometry()
     # what a non-convex object's own mesh (object_mesh) hides from each facet
     mesh = {}
@@ -143,8 +156,18 @@ def joint_inputs(
         exposure = b.exposure[used]
     elif b.pixel_encoding == "linear-radiance":
         exposure = np.ones(int(used.sum()))
-    data = il.joint_data(y[keep][:, used], ok[:, used], bases, exposure=exposure, fresnel=fresnel)
+    clip = censored[keep][:, used] if clipped == "likelihood" else None
+    data = il.joint_data(
+        y[keep][:, used], ok[:, used], bases, exposure=exposure, fresnel=fresnel, censored=clip
+    )
     return data, used, names
+
+
+def check_clipped(clipped: str) -> str:
+    """``clipped`` if it is one of :data:`CLIPPED`, else a ValueError naming them."""
+    if clipped not in CLIPPED:
+        raise ValueError(f"clipped entries: unknown treatment {clipped!r}; use one of {CLIPPED}")
+    return clipped
 
 
 def joint_max_sweeps(options: dict) -> int:
@@ -187,8 +210,9 @@ def joint_fit(
     family = check_lobe_family(options.pop("lobe_family", DEFAULT_LOBE_FAMILY))
     albedo = options.pop("occluder_albedo", None)
     shadow = options.pop("ground_shadow", DEFAULT_GROUND_SHADOW)
+    clipped = options.pop("clipped", DEFAULT_CLIPPED)
     data, used, names = joint_inputs(
-        b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow
+        b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow, clipped
     )
     options["max_sweeps"] = joint_max_sweeps(options)
     options.pop("max_steps", None)
@@ -257,6 +281,7 @@ def joint_fit(
     idata.posterior.attrs["fresnel"] = fresnel
     idata.posterior.attrs["lobe_family"] = family
     idata.posterior.attrs["ground_shadow"] = shadow
+    idata.posterior.attrs["clipped"] = clipped
     if albedo is not None:
         idata.posterior.attrs["occluder_albedo"] = float(albedo)
     idata.observed_data["valid"] = (("facet", "frame"), data.valid)

@@ -18,12 +18,17 @@ studies/README.md). Too long for the test suite.
         [--max-sweeps 4000] [--out studies/results/sbc_material.json]
         [--fresnel radiance --out studies/results/sbc_material_fresnel.json]
         [--lobe ggx --out studies/results/sbc_material_ggx.json]
+        [--clip 0.9 --out studies/results/sbc_material_clipped.json]
 
 With ``--fresnel radiance`` the model has the Fresnel raise
 (:mod:`bayesgloss.fresnel`), its strength k and normal-incidence albedo A
 drawn from their prior with the rest, and k's rank is tested too. With
 ``--lobe ward`` or ``ggx`` the glossy basis is that family's
 (:mod:`bayesgloss.lobes`), on the same Phong-equivalent exponent axis.
+With ``--clip Q`` every value above one top code for the whole design
+(:func:`top_code`: the median over prior-predictive objects of their
+Q-quantile) is clipped to it and fitted as censored
+(:mod:`bayesgloss.sampling.censored`).
 """
 
 from __future__ import annotations
@@ -87,15 +92,41 @@ def sbc_design(
     return dataclasses.replace(ref, floor=0.01 * bases.total().diffuse.max(axis=1))
 
 
-def sbc_object(ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int = 99) -> dict:
-    """Object ``index`` of the SBC stream ``seed``: drawn from the prior,
-    simulated, fitted; the ranks of the truth among ``n_draws`` draws picked
-    evenly over the kept ones, and the run's diagnostics."""
-    rng = np.random.default_rng([seed, index])
-    t = ref.shape[1]
+def prior_predictive(ref, rng) -> tuple:
+    """One object from the model's prior and its simulated data: (theta,
+    hyper, lam, y (F, T))."""
     th, hyper, lam = il.sample_prior_material(ref, 1, rng)
     y = il.simulate(th.transpose(1, 0, 2)[:, :, None, :], lam[:, None], ref, rng)[0, :, 0]
+    return th, hyper, lam, y
+
+
+def top_code(ref, quantile: float = 0.9, n: int = 200, seed: int = 1) -> float:
+    """A top code for the clipped objects: the median over ``n`` objects of
+    the prior predictive (their own stream, ``seed``) of each one's
+    ``quantile`` of its values. One number for the whole design, as a
+    camera's top code is: clipping at a level taken from an object's own
+    data or parameters would be another model than the one fitted."""
+    rng = np.random.default_rng(seed)
+    return float(
+        np.median([np.quantile(prior_predictive(ref, rng)[3], quantile) for _ in range(n)])
+    )
+
+
+def sbc_object(
+    ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int = 99, top: float | None = None
+) -> dict:
+    """Object ``index`` of the SBC stream ``seed``: drawn from the prior,
+    simulated, fitted; the ranks of the truth among ``n_draws`` draws picked
+    evenly over the kept ones, and the run's diagnostics. ``top``: values
+    above it clipped to it and fitted as censored (:mod:`bayesgloss.sampling.censored`)."""
+    rng = np.random.default_rng([seed, index])
+    t = ref.shape[1]
+    th, hyper, lam, y = prior_predictive(ref, rng)
     data = dataclasses.replace(ref, y=y)
+    clipped = 0
+    if top is not None and np.any(y >= top):
+        clipped = int(np.sum(y >= top))
+        data = dataclasses.replace(ref, y=np.minimum(y, top), censored=y >= top)
     e, w = 2, 12
     res = sample_material(data, n_ensembles=e, n_walkers=w, max_sweeps=max_sweeps, seed=index)
     gamma = res.draws[0, ..., 0]  # (E, W m), each walker's draws one after another
@@ -111,6 +142,7 @@ def sbc_object(ref, seed: int, index: int, max_sweeps: int = 4000, n_draws: int 
         "ranks": [int(np.sum(x[pick] < v)) for x, v in zip(draws, truth, strict=True)],
         "gamma": float(truth[0]),
         "sigma": float(np.exp(th[0, 0, 3])),
+        "clipped": clipped,
         "converged": bool(res.converged),
         "rhat": float(res.rhat[0]),
         "rhat_walkers": rhat_walkers,
@@ -128,10 +160,19 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="studies/results/sbc_material.json")
     ap.add_argument("--fresnel", default="none", choices=("none", "radiance"))
     ap.add_argument("--lobe", default="phong", choices=("phong", "ward", "ggx"))
+    ap.add_argument(
+        "--clip",
+        type=float,
+        default=None,
+        metavar="QUANTILE",
+        help="clip values above the design's top code (top_code at this quantile) and fit "
+        "them as censored",
+    )
     args = ap.parse_args(argv)
     t0 = time.time()
     ref = sbc_design(paper_three_skies(args.lobe), fresnel=args.fresnel)
-    run = functools.partial(sbc_object, ref, args.seed, max_sweeps=args.max_sweeps)
+    top = None if args.clip is None else top_code(ref, args.clip)
+    run = functools.partial(sbc_object, ref, args.seed, max_sweeps=args.max_sweeps, top=top)
     rows = []
     with process_pool(args.jobs) as pool:
         for row in pool.map(run, range(args.n)):
@@ -142,6 +183,7 @@ def main(argv=None) -> dict:
     out["design"] = {"facets": ref.shape[0], "frames": ref.shape[1], "max_sweeps": args.max_sweeps}
     out["design"]["fresnel"] = args.fresnel
     out["design"]["lobe_family"] = args.lobe
+    out["design"]["top_code"] = top
     out["converged"] = float(np.mean([r["converged"] for r in rows]))
     out["rhat_walkers_quantiles"] = np.quantile(
         [r["rhat_walkers"] for r in rows], [0.5, 0.9, 1.0]

@@ -60,6 +60,7 @@ SETS = {
     "validation_holdout7": "validation_holdout7",
     "validation_holdout8": "validation_holdout8",
     "validation_holdout9": "validation_holdout9",
+    "validation_holdout10": "validation_holdout10",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -71,7 +72,7 @@ RESULTS = HERE / "results"
 QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
-    "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials",
+    "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped",
 )  # fmt: skip
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
@@ -91,6 +92,8 @@ ESTIMATES = {
     "materials": {"per_frame": True, "illumination": "families", "lobe": "materials"},
     # the default with the convex object's shadow on the ground (bayesgloss.object_shadow)
     "shadow": {"per_frame": True, "illumination": "families", "ground_shadow": "convex"},
+    # the default with clipped entries kept as lower bounds (bayesgloss.sampling.censored)
+    "clipped": {"per_frame": True, "illumination": "families", "clipped": "likelihood"},
 }
 #: Methods scored by default on a set that has none cached (``--methods``).
 DEFAULT_METHODS = {
@@ -104,6 +107,7 @@ DEFAULT_METHODS = {
     "validation_holdout7": ("baseline", "fixed", "families", "shadow"),
     "validation_holdout8": ("baseline", "families", "materials"),
     "validation_holdout9": ("baseline", "families", "materials"),
+    "validation_holdout10": ("baseline", "families", "clipped"),
 }
 
 

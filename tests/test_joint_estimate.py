@@ -3,6 +3,7 @@
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from bayesgloss import cli
 from bayesgloss.joint_estimate import frame_convergence, object_convergence
@@ -41,3 +42,52 @@ def test_gloss_short_of_the_rule_is_said_so():
     assert not c["gamma"]["meets_rule"] and c["frames_not_converged"] == []
     line = cli._convergence_line(c)
     assert "short of the rule" in line and "frame" not in line
+
+
+def test_clipped_entries_enter_the_joint_model_as_bounds_only_where_asked(tmp_path):
+    # a bundle whose brightest entries clip (16-bit gamma:2.2 codes, the top
+    # code at 25 W sr^-1 m^-2, below every facet's sky-mirror highlight):
+    # "drop" leaves them out of the joint model's data, "likelihood" keeps
+    # them at their bound, marked censored; the frames used are the same
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import bundle as bundle_io
+    from bayesgloss import estimate
+    from bayesgloss.joint_estimate import joint_inputs
+
+    path = make_synthetic_bundle(
+        tmp_path / "b", specularity=0.5, encoding="gamma:2.2", bits=16, exposure=25.0
+    )
+    b = bundle_io.read_bundle(path)
+    y, usable, cens = estimate.observations(estimate.bundle_curves(b))
+    keep = bundle_io.usable_facets(b, usable, estimate.MIN_FRAMES, cens)
+    dropped, used_d, _ = joint_inputs(b, y, usable, cens, keep, "gensky-clear")
+    kept, used, _ = joint_inputs(b, y, usable, cens, keep, "gensky-clear", clipped="likelihood")
+    np.testing.assert_array_equal(used_d, used)
+    c = cens[keep][:, used]
+    assert dropped.censored is None and c.sum() >= 20, c.sum()
+    np.testing.assert_array_equal(kept.censored, c)
+    np.testing.assert_array_equal(kept.valid, dropped.valid | c)
+    np.testing.assert_allclose(kept.y[c], y[keep][:, used][c])  # the bound
+    assert not np.any(dropped.valid & c)
+
+
+def test_clipped_reaches_the_estimate_and_its_units(tmp_path, monkeypatch):
+    # --clipped must reach each unit's options (absent where not given:
+    # earlier runs keep their keys) and, through estimate_unit, estimate_bundle
+    from conftest import estimate_option_route
+
+    route = estimate_option_route(monkeypatch, tmp_path, ["--clipped", "likelihood"], "clipped")
+    assert route["units"] == ["likelihood", "likelihood"]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == ["likelihood", None, "likelihood"]
+
+
+def test_an_unknown_clipped_treatment_is_refused_before_any_fit(tmp_path):
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import estimate
+
+    path = make_synthetic_bundle(tmp_path / "b", seed=2)
+    with pytest.raises(ValueError, match="clipped entries: unknown treatment 'keep'"):
+        estimate.estimate_bundle(path, clipped="keep")

@@ -64,6 +64,11 @@ class _JointChain:
     """The state of E ensembles of W walkers and one sweep of the moves."""
 
     def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
+        if data.censored is not None:
+            raise ValueError(
+                "the per-facet joint sampler has no likelihood for clipped (censored) entries: "
+                "leave them out of its data, or use the one-material sampler (sample_material)"
+            )
         self._setup(data, n_ensembles, n_walkers, rng)
         lam0 = starting_frames(data)  # (T, L)
         start = initial_ensemble(
@@ -140,8 +145,9 @@ class _JointChain:
         self.log_p = self._log_prob(self._coords(), np.arange(self.w))
         self.sweeps += 1
 
-    def _draw_log_sigma(self, q):
-        return _log_sigma_draws(q, self.cd, self.rng)
+    def _draw_log_sigma(self, q, data=None):
+        cd = self.cd if data is None else data.curve_data()
+        return _log_sigma_draws(q, cd, self.rng)
 
     def _frame_prior(self, lam, walkers=slice(None)):
         """Each frame's log prior, (E, H, T), for the walkers' lam (E, H, T, L)."""
@@ -350,7 +356,7 @@ def _curve_data_at(data: il.JointData, lam) -> lk.CurveData:
     return lk.CurveData(
         cd.y,
         cd.valid,
-        cd.censored,
+        cd.censored if data.censored is None else data.censored,
         np.sum(weights[:, None] * data.diffuse, axis=0),
         np.sum(weights[:, None, None] * data.glossy, axis=0),
         cd.log_n_grid,

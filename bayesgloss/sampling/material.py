@@ -68,7 +68,7 @@ from scipy import special
 
 from .. import fresnel as fr
 from .. import illumination as il
-from . import ridge, schedule
+from . import censored, ridge, schedule
 from .joint import _curve_data_at, _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .posterior import sample_posterior
@@ -115,6 +115,9 @@ class _MaterialChain(_JointChain):
             log_a = np.log(0.3) + 0.3 * rng.standard_normal((e, 1, w))
             th[..., a_col] = _reflect(log_a, a_lo, a_hi)
         self.th = th
+        # clipped entries: each walker's completed values and its sigma (censored)
+        self.y_complete = censored.starting_completion(data, (e, f, w))
+        self.log_sigma = None
         # each facet's residual sd at the start (relative), fixed: the profile's weights
         th0 = np.zeros((1, f, 1, 3))
         th0[..., 0], th0[..., 1], th0[..., 2] = gamma0, log_n0, log_s0[None, :, None]
@@ -195,11 +198,19 @@ class _MaterialChain(_JointChain):
         frames = np.stack([np.log(a), np.log(b)], -1) + level[..., None, None]
         return log_s - level[:, None], frames
 
-    def _conditional(self, th, hyper, lam, parts) -> np.ndarray:
+    def _likelihood(self, th, lam, parts=None, walkers=slice(None)):
+        """The likelihood of the shared and collective moves, (E, H): sigma
+        integrated out, or with clipped entries, given the sweep's sigma."""
+        if self.y_complete is None:
+            return il.log_likelihood_shared_sigma(th, lam, self.data, parts)
+        log_sigma = self.log_sigma[:, :, walkers]
+        return censored.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum((1, 3))
+
+    def _conditional(self, th, hyper, lam, parts, walkers=slice(None)) -> np.ndarray:
         """log p(gamma, n, s, frames | m, tau, sun weights), sigma integrated
         out, (E, H), for theta's :func:`~bayesgloss.illumination.unit_parts` ``parts``."""
         lp = il.log_prior_material(th, hyper, self.data)
-        ll = il.log_likelihood_shared_sigma(th, lam, self.data, parts)
+        ll = self._likelihood(th, lam, parts, walkers)
         frames = self._frame_prior(lam, hyper=hyper).sum(-1)
         # summed as :meth:`_full_density` sums: the same number for the same state
         return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
@@ -254,9 +265,10 @@ class _MaterialChain(_JointChain):
                 s_new, f_new = self._profile(parts_new, lam)
                 new[..., 2] += s_new - s_old
                 lam_new[..., 1 : 1 + f_new.shape[-1]] += f_new - f_old
-            lp_new = np.where(inside, self._conditional(new, hyper, lam_new, parts_new), -np.inf)
+            lp_new = self._conditional(new, hyper, lam_new, parts_new, idx)
+            lp_new = np.where(inside, lp_new, -np.inf)
             if known is None:
-                lp_old = self._conditional(old, hyper, lam, parts_old)
+                lp_old = self._conditional(old, hyper, lam, parts_old, idx)
             else:  # each walker's density is its own: the other half's move left it
                 lp_old = known[:, idx]
             with np.errstate(invalid="ignore"):
@@ -282,6 +294,9 @@ class _MaterialChain(_JointChain):
         step = 2.38 / np.sqrt(info)
 
         def density(th):
+            if self.y_complete is not None:
+                ll = censored.entry_log_likelihood(th, self.lam, log_sigma, data, parts).sum(-1)
+                return ll - 0.5 * ((th[..., 2] - m) / tau) ** 2
             z, sum_log_v = il._residuals(il.predict(th, self.lam, data, parts), data, axis=-1)
             ll = np.sum(-0.5 * z * z, -1) * inv_var - sum_log_v
             return ll - 0.5 * ((th[..., 2] - m) / tau) ** 2
@@ -300,9 +315,15 @@ class _MaterialChain(_JointChain):
 
     def sweep(self) -> None:
         data = self.data
+        if self.y_complete is not None:  # clipped entries completed, then sigma drawn
+            self.log_sigma = censored.completion_and_sigma(self)
+            self._density = None  # the collective move's density was at the old sigma
         parts = self._shared_step()
-        _, q = il.log_likelihood_shared_sigma(self.th, self.lam, data, parts, with_q=True)
-        log_sigma = self._draw_log_sigma(q)
+        if self.y_complete is None:
+            _, q = il.log_likelihood_shared_sigma(self.th, self.lam, data, parts, with_q=True)
+            log_sigma = self._draw_log_sigma(q)
+        else:
+            log_sigma = self.log_sigma
         self._scale_step(parts, log_sigma)
         self._hyper_draw()
         self._sun_weight_step()
@@ -314,8 +335,14 @@ class _MaterialChain(_JointChain):
         self.collective_moves()
         self.sweeps += 1
 
-    def _draw_log_sigma(self, q):
-        return il.draw_shared_log_sigma(q, self.data, self.rng)
+    def _draw_log_sigma(self, q, data=None):
+        return il.draw_shared_log_sigma(q, data or self.data, self.rng)
+
+    def _frame_density(self, th, lam, parts, log_sigma, walkers=slice(None)):
+        if self.y_complete is None:
+            return super()._frame_density(th, lam, parts, log_sigma, walkers)
+        ll = censored.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum(1)
+        return ll + self._frame_prior(lam, walkers)
 
     def _frame_prior(self, lam, walkers=slice(None), hyper=None):
         hyper = self.hyper[:, walkers] if hyper is None else hyper
@@ -391,8 +418,12 @@ class _MaterialChain(_JointChain):
         rng, w = self.rng, np.exp(il.log_sun_weights(self.hyper))  # (E, W, 3)
         prop = self.lam.copy()
         prop[..., 1] = il.draw_log_sun(w, self.t, self.data.frame_priors, rng)
-        cur = il.frame_log_likelihood(th, self.lam, log_sigma, self.data, parts)
-        new = il.frame_log_likelihood(th, prop, log_sigma, self.data, parts)
+        if self.y_complete is None:
+            cur = il.frame_log_likelihood(th, self.lam, log_sigma, self.data, parts)
+            new = il.frame_log_likelihood(th, prop, log_sigma, self.data, parts)
+        else:
+            cur = censored.entry_log_likelihood(th, self.lam, log_sigma, self.data, parts).sum(1)
+            new = censored.entry_log_likelihood(th, prop, log_sigma, self.data, parts).sum(1)
         ok = np.log(rng.random(new.shape)) < new - cur
         self.lam = np.where(ok[..., None], prop, self.lam)
         self.accepted["sun jump"] += ok.mean()
@@ -437,9 +468,7 @@ class _MaterialChain(_JointChain):
     def _full_density(self, th, hyper, lam) -> np.ndarray:
         """The joint log posterior (sigma integrated out) of every walker, (E, W)."""
         lp = il.log_prior_material(th, hyper, self.data)
-        ll = il.log_likelihood_shared_sigma(
-            np.where(np.isfinite(lp)[:, None, :, None], th, self.th), lam, self.data
-        )
+        ll = self._likelihood(np.where(np.isfinite(lp)[:, None, :, None], th, self.th), lam)
         frames = self._frame_prior(lam, hyper=hyper).sum(-1)
         return np.where(np.isfinite(lp), lp + ll, -np.inf) + frames
 

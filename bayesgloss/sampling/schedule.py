@@ -25,7 +25,7 @@ every family to its first check and only those in reach on).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -316,15 +316,20 @@ def run_chain(
     if getattr(chains[0], "hyper", None) is not None:  # (m, E, W, 2) -> (E, W m, 2)
         hk = _kept_half(run.groups, "hyper_kept")[keep]
         material = hk.transpose(1, 2, 0, 3).reshape(e, w * m, -1)
-    # log sigma from its conditional at every draw, each group's from its own generator
+    # log sigma from its conditional at every draw, each group's from its own
+    # generator; given the entries not clipped (a clipped one's completed
+    # value is not kept)
     th_e = draws3.transpose(1, 0, 2, 3)  # (E, F, S, C)
+    measured = data
+    if data.censored is not None:
+        measured = replace(data, valid=data.valid & ~data.censored, censored=None)
     ls, start = [], 0
     for chain, size in zip(chains, sizes, strict=True):
         group = slice(start, start + size)
         start += size
-        _, q = il.log_likelihood_sigma_marginal(th_e[group], frames[group], data, with_q=True)
+        _, q = il.log_likelihood_sigma_marginal(th_e[group], frames[group], measured, with_q=True)
         state = chain.rng.bit_generator.state  # a run run on goes on from the chain's own draws
-        ls.append(chain._draw_log_sigma(q))  # (E, F, S), the chain's own noise model
+        ls.append(chain._draw_log_sigma(q, measured))  # (E, F, S), the chain's own noise model
         chain.rng.bit_generator.state = state
     ls = np.concatenate(ls)
     # log sigma in column 3; the Fresnel k and log A (columns 4, 5) after it
