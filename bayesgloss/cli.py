@@ -326,7 +326,7 @@ def _print_estimate(name, summary) -> None:
                 f"  {stack['high_k_share']:.0%} of the entries' PSIS-LOO unreliable "
                 "(Pareto k > 0.7, weighted by the families' stacking weights)"
             )
-    if "lobe_families" in summary:  # the stacked lobe families (estimate --lobe families)
+    if "lobe_families" in summary:  # the stacked lobes (the default, or --lobe families)
         fam = summary["lobe_families"]
         weights = ", ".join(f"{name} {f['weight']:.2f}" for name, f in fam.items())
         print(f"lobe families (stacking weight): {weights}")
@@ -663,10 +663,11 @@ def _parser() -> argparse.ArgumentParser:
         "--lobe",
         default=None,
         choices=(*LOBE_FAMILIES, "families", "materials"),
-        help="the glossy lobe's family (default 'phong'): Radiance's 'ward', a GGX "
-        "microfacet lobe with Smith shadowing 'ggx', or 'families': one fit per family, "
-        "stacked by PSIS-LOO (bayesgloss.lobes, bayesgloss.lobe_families), or "
-        "'materials': those and GGX with Schlick's Fresnel (a dielectric coating), stacked",
+        help="the glossy lobe: 'materials' (the default with per-frame illumination and no "
+        "--fresnel): Phong, Radiance's Ward, GGX with Smith shadowing and GGX with Schlick's "
+        "Fresnel (a dielectric coating), one fit each, stacked by PSIS-LOO "
+        "(bayesgloss.lobe_families); 'families': the first three; or one of them alone "
+        "('phong', the default otherwise; 'ward'; 'ggx')",
     )
     es.add_argument(
         "--occluder-albedo",

@@ -22,14 +22,13 @@ that model is fitted four times, under the per-frame mixture of sky
 shapes and under each of gensky's clear, intermediate and overcast skies
 all day, and the object's gamma and n are the fits' mixture with their
 PSIS-LOO stacking weights (:mod:`bayesgloss.sky_families`; the facets'
-and frames' answers are the most-weighted fit's). ``lobe="families"`` fits
-the glossy lobe of each family of :mod:`bayesgloss.lobes` (Phong, Ward, GGX)
-under the most-weighted sky and stacks them the same way
-(:mod:`bayesgloss.lobe_families`; opt-in); ``lobe="materials"`` stacks, beside
-the three, GGX with Schlick's Fresnel, a dielectric coating's (opt-in). The summaries below are
-kept beside it (a facet population's mu misled on overcast days: the
-facets' posteriors share the frames, and their product read confident
-answers the data did not hold).
+and frames' answers are the most-weighted fit's). The glossy lobe is
+averaged likewise (``lobe="materials"``, the default since stop 42): the
+lobes of :mod:`bayesgloss.lobes` (Phong, Ward, GGX) and GGX with Schlick's
+Fresnel, fitted under the most-weighted sky and stacked
+(:mod:`bayesgloss.lobe_families`; Phong alone on an overcast day). Not a
+facet population's mu: on overcast days the facets' posteriors share the
+frames, and their product read confident answers the data did not hold.
 
 With fixed brightness (``per_frame=False``; the facets sampled on their own,
 :mod:`bayesgloss.facets_estimate`), object-level gloss, beside the
@@ -90,7 +89,6 @@ from .irradiance import measured_sky
 from .joint_estimate import (
     DEFAULT_CLIPPED,
     DEFAULT_FRESNEL,
-    DEFAULT_LOBE_FAMILY,
     bundle_sky,
     check_clipped,
     frame_summary,
@@ -277,7 +275,8 @@ def estimate_bundle(
         those and GGX with Schlick's Fresnel
         (:data:`bayesgloss.lobe_families.MATERIAL_FAMILIES`; ``fresnel``
         must then be left at its default); default
-        :data:`bayesgloss.joint_estimate.DEFAULT_LOBE_FAMILY`.
+        :func:`bayesgloss.lobe_families.default_lobe` (``"materials"``
+        where it applies, else ``"phong"``).
     occluder_albedo : {"fixed", "stacked"}, optional
         For a bundle with an ``object_mesh`` (per-frame illumination only):
         its faces' albedo fixed at :data:`bayesgloss.render.OCCLUDER_REFLECTANCE`,
@@ -341,7 +340,8 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
-    lobe, lobe_stacked = lobe_families.check_lobe(lobe or DEFAULT_LOBE_FAMILY, fresnel, joint)
+    lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh)
+    lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
     if shadow != DEFAULT_GROUND_SHADOW and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")

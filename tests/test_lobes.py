@@ -273,3 +273,18 @@ def test_report_names_the_stacked_families_weights():
         "lobe: phong 0.00, ward 0.90, ggx 0.10",
     ]
     assert report._model_weights({}) == ""
+
+
+def test_the_default_lobe_is_the_material_stack_where_it_applies():
+    # the stack with the joint model, no Fresnel model named and no object
+    # mesh; Phong where the fixed-brightness estimator runs, where a Fresnel
+    # model is named (the stack chooses each fit's own), and for a mesh bundle
+    # (its faces' albedo is the stack there, and no holdout that decided the
+    # default had one)
+    from bayesgloss.lobe_families import DEFAULT_LOBE, default_lobe
+
+    assert DEFAULT_LOBE == "materials"
+    assert default_lobe(True, "none") == "materials"
+    assert default_lobe(False, "none") == "phong"
+    assert default_lobe(True, "radiance") == "phong"
+    assert default_lobe(True, "none", has_mesh=True) == "phong"
