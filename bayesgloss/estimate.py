@@ -340,7 +340,7 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
-    lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh)
+    lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh, illumination)
     lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
     if shadow != DEFAULT_GROUND_SHADOW and not joint:

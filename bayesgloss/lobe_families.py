@@ -69,15 +69,20 @@ MATERIAL_FAMILIES = {
 }
 
 
-def default_lobe(joint: bool, fresnel: str, has_mesh: bool = False) -> str:
+def default_lobe(
+    joint: bool, fresnel: str, has_mesh: bool = False, illumination: str = "families"
+) -> str:
     """The lobe ``estimate`` fits where none is named: :data:`DEFAULT_LOBE`
-    with the joint model and no Fresnel model named (``materials`` chooses
-    each fit's own); otherwise Phong, the only lobe of the fixed-brightness
-    estimator and the one a named Fresnel model is fitted with. A bundle
-    with an ``object_mesh`` keeps Phong with its faces' albedo stacked
-    (:mod:`bayesgloss.occluder_albedo`; one stack at a time): the holdouts
-    that made ``materials`` the default held no such bundle."""
-    if joint and fresnel == DEFAULT_FRESNEL and not has_mesh:
+    where the estimate is the one the deciding holdouts scored, the joint
+    model under the stacked sky families (``illumination="families"``, the
+    default sky) with no Fresnel model named (``materials`` chooses each
+    fit's own) and no ``object_mesh``; otherwise Phong, as each of those
+    was checked: the fixed-brightness estimator's only lobe, the lobe of a
+    named sky or Fresnel model and of ``--sky auto`` (whose speed goal, 30 s
+    on the benchmark bundle, the stack's four fits would break: 61-134 s
+    against 15-28), and of a mesh bundle, whose faces' albedo is stacked
+    instead (:mod:`bayesgloss.occluder_albedo`; one stack at a time)."""
+    if joint and illumination == "families" and fresnel == DEFAULT_FRESNEL and not has_mesh:
         return DEFAULT_LOBE
     return DEFAULT_LOBE_FAMILY
 

@@ -276,15 +276,42 @@ def test_report_names_the_stacked_families_weights():
 
 
 def test_the_default_lobe_is_the_material_stack_where_it_applies():
-    # the stack with the joint model, no Fresnel model named and no object
-    # mesh; Phong where the fixed-brightness estimator runs, where a Fresnel
-    # model is named (the stack chooses each fit's own), and for a mesh bundle
-    # (its faces' albedo is the stack there, and no holdout that decided the
-    # default had one)
+    # the stack where the estimate is the one the deciding holdouts scored:
+    # the joint model under the stacked sky families, no Fresnel model named,
+    # no object mesh. Phong where the fixed-brightness estimator runs, where
+    # a Fresnel model or a sky is named (--sky auto keeps its speed), and for
+    # a mesh bundle (its faces' albedo is the stack there)
     from bayesgloss.lobe_families import DEFAULT_LOBE, default_lobe
 
     assert DEFAULT_LOBE == "materials"
-    assert default_lobe(True, "none") == "materials"
-    assert default_lobe(False, "none") == "phong"
-    assert default_lobe(True, "radiance") == "phong"
-    assert default_lobe(True, "none", has_mesh=True) == "phong"
+    assert default_lobe(True, "none", False, "families") == "materials"
+    assert default_lobe(False, "none", False, "families") == "phong"
+    assert default_lobe(True, "radiance", False, "families") == "phong"
+    assert default_lobe(True, "none", True, "families") == "phong"
+    for sky in ("auto", "gensky-clear", "measured"):
+        assert default_lobe(True, "none", False, sky) == "phong"
+
+
+def test_the_default_estimate_fits_the_material_stack(tmp_path, monkeypatch):
+    # estimate_bundle with no options reaches the material stack under the sky
+    # families (the fits themselves caught before they run), and with a named
+    # sky the single Phong fit
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import estimate, lobe_families
+
+    class Caught(Exception):
+        pass
+
+    def catch_stack(*args, materials=False, **kwargs):
+        raise Caught("materials" if materials else "families", kwargs.get("illumination"))
+
+    monkeypatch.setattr(lobe_families, "fit_lobe_families", catch_stack)
+    path = make_synthetic_bundle(tmp_path / "b", seed=3)
+    with pytest.raises(Caught) as caught:
+        estimate.estimate_bundle(path)
+    assert caught.value.args[0] == "materials"
+    res = estimate.estimate_bundle(
+        path, illumination="gensky-clear", sampler_options={"max_steps": 100}
+    )
+    assert "lobe_families" not in res.summary
