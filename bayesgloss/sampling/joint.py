@@ -146,7 +146,7 @@ class _JointChain:
         self.sweeps += 1
 
     def _draw_log_sigma(self, q, data=None):
-        cd = self.cd if data is None else data.curve_data()
+        cd = self.cd if data is None or data is self.data else data.curve_data()
         return _log_sigma_draws(q, cd, self.rng)
 
     def _frame_prior(self, lam, walkers=slice(None)):

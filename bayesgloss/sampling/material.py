@@ -59,6 +59,12 @@ whole state) with these blocks per sweep:
    the conditional that the priors of m and of the frames make on a lattice
    (:mod:`bayesgloss.sampling.ridge`: that conditional is bimodal where the
    sun is hazy, and a random walk did not cross between its modes).
+
+Where entries clipped at the top code are kept (``clipped="likelihood"``,
+:mod:`bayesgloss.sampling.censored`), each sweep first completes them and
+draws sigma given the completed data, and every block then takes that
+sigma as given (the shared and collective moves too), the clipped entries
+by their survival term.
 """
 
 from __future__ import annotations
@@ -207,8 +213,10 @@ class _MaterialChain(_JointChain):
         return censored.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum((1, 3))
 
     def _conditional(self, th, hyper, lam, parts, walkers=slice(None)) -> np.ndarray:
-        """log p(gamma, n, s, frames | m, tau, sun weights), sigma integrated
-        out, (E, H), for theta's :func:`~bayesgloss.illumination.unit_parts` ``parts``."""
+        """log p(gamma, n, s, frames | m, tau, sun weights), (E, H), for
+        theta's :func:`~bayesgloss.illumination.unit_parts` ``parts`` and the
+        state of ``walkers``; sigma integrated out (given, with clipped
+        entries: :meth:`_likelihood`)."""
         lp = il.log_prior_material(th, hyper, self.data)
         ll = self._likelihood(th, lam, parts, walkers)
         frames = self._frame_prior(lam, hyper=hyper).sum(-1)
@@ -336,7 +344,7 @@ class _MaterialChain(_JointChain):
         self.sweeps += 1
 
     def _draw_log_sigma(self, q, data=None):
-        return il.draw_shared_log_sigma(q, data or self.data, self.rng)
+        return il.draw_shared_log_sigma(q, self.data if data is None else data, self.rng)
 
     def _frame_density(self, th, lam, parts, log_sigma, walkers=slice(None)):
         if self.y_complete is None:
@@ -466,7 +474,8 @@ class _MaterialChain(_JointChain):
         return th, hyper, lam
 
     def _full_density(self, th, hyper, lam) -> np.ndarray:
-        """The joint log posterior (sigma integrated out) of every walker, (E, W)."""
+        """The joint log posterior of every walker, (E, W): sigma integrated
+        out, or with clipped entries given the sweep's (:meth:`_likelihood`)."""
         lp = il.log_prior_material(th, hyper, self.data)
         ll = self._likelihood(np.where(np.isfinite(lp)[:, None, :, None], th, self.th), lam)
         frames = self._frame_prior(lam, hyper=hyper).sum(-1)
