@@ -99,6 +99,7 @@ __all__ = [
     "log_likelihood_shared_sigma",
     "draw_shared_log_sigma",
     "frame_log_likelihood",
+    "entry_log_likelihood",
     "pointwise_log_likelihood",
     "sample_prior",
     "sample_prior_material",
@@ -834,19 +835,30 @@ def frame_log_likelihood(theta, lam, log_sigma, data: JointData, parts) -> np.nd
     return np.sum(-0.5 * zz * zz, axis=1) - sum_log_v
 
 
-def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
-    """Log likelihood of every (facet, frame), (E, F, W, T), theta with log
-    sigma as its 4th coordinate; NaN where invalid. A censored entry's is
-    the probability that the value is at least its bound, log Phi((mu - y)
-    / sd) (the likelihood of what was observed: the pixel clipped)."""
-    mu = predict(theta, lam, data)
-    z, log_v = _residuals(mu, data)
-    log_sigma = theta[..., 3:4]
-    z = z * np.exp(-log_sigma)
-    ll = -0.5 * z * z - log_v - log_sigma - 0.5 * np.log(2 * np.pi)
+def entry_log_likelihood(theta, lam, log_sigma, data: JointData, parts=None) -> np.ndarray:
+    """Each entry's log likelihood given sigma (``log_sigma`` (E, F, W)),
+    (E, F, W, T), 0 where invalid, -log sqrt(2 pi) left out: a measured
+    entry's normal density, -z^2 / 2 - log(sigma v); a censored entry's
+    survival at its bound, log Phi(-z) (the likelihood of what was
+    observed: the pixel clipped); z = (y - mu) / (sigma v), v = mu + c_f."""
+    z, log_v = _residuals(predict(theta, lam, data, parts), data)
+    ls = log_sigma[..., None]
+    z = z * np.exp(-ls)
+    ll = -0.5 * z * z - log_v - ls
     if data.censored is not None:
         ll = np.where(data.censored[None, :, None, :], special.log_ndtr(-z), ll)
-    return np.where(data.valid[None, :, None, :], ll, np.nan)
+    return np.where(data.valid[None, :, None, :], ll, 0.0)
+
+
+def pointwise_log_likelihood(theta, lam, data: JointData) -> np.ndarray:
+    """Log likelihood of every (facet, frame), (E, F, W, T), theta with log
+    sigma as its 4th coordinate; NaN where invalid
+    (:func:`entry_log_likelihood` with the normal's constant on measured entries)."""
+    ll = entry_log_likelihood(theta, lam, theta[..., 3], data)
+    const = np.full(data.shape, 0.5 * np.log(2 * np.pi))
+    if data.censored is not None:
+        const[data.censored] = 0.0
+    return np.where(data.valid[None, :, None, :], ll - const[None, :, None, :], np.nan)
 
 
 def sample_prior(data: JointData, size: int, rng: np.random.Generator):

@@ -122,10 +122,11 @@ def joint_inputs(
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
     ground = "sky" if illumination == "point-sun" else "plane"
-    ok = usable[keep] & ~censored[keep]  # measured entries
-    used = ok.any(axis=0) & b.sun_up
-    if clipped == "likelihood":  # and the clipped ones, as lower bounds
-        ok = usable[keep]
+    measured = usable[keep] & ~censored[keep]
+    used = measured.any(axis=0) & b.sun_up  # frames with a measured entry
+    ok, clip = measured, None
+    if clipped == "likelihood":  # the clipped entries too, as lower bounds
+        ok, clip = usable[keep], censored[keep][:, used]
     geometry = b.view_geometry()
     # what a non-convex object's own mesh (object_mesh) hides from each facet
     mesh = {}
@@ -156,7 +157,6 @@ def joint_inputs(
         exposure = b.exposure[used]
     elif b.pixel_encoding == "linear-radiance":
         exposure = np.ones(int(used.sum()))
-    clip = censored[keep][:, used] if clipped == "likelihood" else None
     data = il.joint_data(
         y[keep][:, used], ok[:, used], bases, exposure=exposure, fresnel=fresnel, censored=clip
     )

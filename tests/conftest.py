@@ -185,6 +185,19 @@ def _encode_codes(value, encoding, response_gamma):
     return v
 
 
+def study_script(name: str):
+    """``studies/NAME.py`` loaded as a module (the studies are scripts, not a
+    package), and its path: (module, path as str)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = str(Path(__file__).resolve().parents[1] / "studies" / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(f"{name}_study", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module, path
+
+
 def paper_three_skies_bases(**kwargs):
     """Split bases of the paper scene (SW) under gensky's clear, intermediate and
     overcast skies (the ``auto`` mixture), sun-up frames, and the seen

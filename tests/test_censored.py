@@ -1,24 +1,14 @@
 """Tests of bayesgloss.sampling.censored: clipped entries in the one-material sampler."""
 
 import dataclasses
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import study_script
 from scipy import stats
 
 from bayesgloss import illumination as il
 from bayesgloss.sampling import censored, sample_joint, sample_material
-
-STUDY = Path(__file__).resolve().parents[1] / "studies" / "sbc_material.py"
-
-
-def _study():
-    spec = importlib.util.spec_from_file_location("sbc_material_study", str(STUDY))
-    study = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(study)
-    return study
 
 
 @pytest.mark.parametrize("a", [-1.5, 0.0, 2.5, 8.0])
@@ -46,7 +36,7 @@ def test_truncated_normal_far_in_the_tail():
 def clipped_object(paper_three_skies):
     """A prior-predictive object of 6 facets over 6 frames with its values
     above the design's top code (the 80 % point) clipped: (ref, data, truth)."""
-    study = _study()
+    study, _ = study_script("sbc_material")
     ref = study.sbc_design(paper_three_skies, facets=6, frames=6)
     top = study.top_code(ref, 0.8, n=60)
     rng = np.random.default_rng([5, 3])
@@ -67,7 +57,7 @@ def test_a_clipped_entry_counts_by_its_survival(clipped_object):
     ref, data, (th, hyper, lam) = clipped_object
     theta = th.transpose(1, 0, 2)[:, :, None, :]  # (1, F, 1, 4)
     point = il.pointwise_log_likelihood(theta, lam[:, None], data)[0, :, 0]
-    entry = censored.entry_log_likelihood(theta, lam[:, None], theta[..., 3], data)[0, :, 0]
+    entry = il.entry_log_likelihood(theta, lam[:, None], theta[..., 3], data)[0, :, 0]
     cut = data.censored
     assert np.allclose(point[~cut], entry[~cut] - 0.5 * np.log(2 * np.pi))
     mu = il.predict(theta, lam[:, None], data)[0, :, 0]
@@ -129,14 +119,14 @@ def test_one_material_sbc_with_clipped_entries(paper_three_skies):
     from bayesgloss.pool import process_pool
     from bayesgloss.runner import script_unit
 
-    study = _study()
+    study, path = study_script("sbc_material")
     ref = study.sbc_design(paper_three_skies, facets=6, frames=6)
     top = study.top_code(ref, 0.85)
     with process_pool(2) as pool:
         futures = [
             pool.submit(
                 script_unit,
-                str(STUDY),
+                path,
                 "sbc_object",
                 ref=ref,
                 seed=2042,

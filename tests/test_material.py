@@ -124,16 +124,12 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe):
     # prior with the rest, and its ranks are tested too. With the GGX or the
     # Ward lobe (bayesgloss.lobes) the tables are that family's, the sampler
     # the same.
-    import importlib.util
-    from pathlib import Path
+    from conftest import study_script
 
     from bayesgloss.pool import process_pool
     from bayesgloss.runner import script_unit
 
-    path = str(Path(__file__).resolve().parents[1] / "studies" / "sbc_material.py")
-    spec = importlib.util.spec_from_file_location("sbc_material_study", path)
-    study = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(study)
+    study, path = study_script("sbc_material")
     bases = paper_three_skies if lobe == "phong" else study.paper_three_skies(lobe)
     ref = study.sbc_design(bases, facets=6, frames=6, fresnel=fresnel)
     with process_pool(2) as pool:  # the study's objects, importable in every worker

@@ -5,8 +5,9 @@ known only to be at least its bound c (:func:`bayesgloss.estimate.observations`)
 Those are the brightest entries, often the glossy peaks: leaving them out
 (the joint model's ``clipped="drop"``) keeps only the frames whose value
 stayed below c. Their likelihood is the noise's survival at the bound,
-Phi((mu - c) / sd) (:func:`entry_log_likelihood`,
-:func:`bayesgloss.illumination.pointwise_log_likelihood`).
+Phi((mu - c) / sd) (:func:`bayesgloss.illumination.entry_log_likelihood`,
+which :func:`~bayesgloss.illumination.pointwise_log_likelihood` and the
+sampler's blocks share).
 
 The sampler integrates the one sigma out of its likelihood in closed form
 where every entry is measured; a survival term does not allow that. With
@@ -34,7 +35,6 @@ from .. import illumination as il
 __all__ = [
     "truncated_normal_above",
     "starting_completion",
-    "entry_log_likelihood",
     "completion_and_sigma",
 ]
 
@@ -61,21 +61,6 @@ def starting_completion(data: il.JointData, shape: tuple[int, int, int]) -> np.n
         return None
     e, f, w = shape
     return np.broadcast_to(data.y[None, :, None, :], (e, f, w, data.shape[1])).copy()
-
-
-def entry_log_likelihood(theta, lam, log_sigma, data: il.JointData, parts=None) -> np.ndarray:
-    """Each entry's log likelihood given the one sigma (``log_sigma`` (E, F,
-    W)), (E, F, W, T), 0 where invalid, -log sqrt(2 pi) left out: a
-    measured entry's normal density, -z^2 / 2 - log(sigma v); a clipped
-    entry's survival at its bound, log Phi(-z); z = (y - mu) / (sigma v),
-    v = mu + c_f (relative noise)."""
-    z, log_v = il._residuals(il.predict(theta, lam, data, parts), data)
-    ls = log_sigma[..., None]
-    z = z * np.exp(-ls)
-    ll = -0.5 * z * z - log_v - ls
-    if data.censored is not None:
-        ll = np.where(data.censored[None, :, None, :], special.log_ndtr(-z), ll)
-    return np.where(data.valid[None, :, None, :], ll, 0.0)
 
 
 def completion_and_sigma(chain) -> np.ndarray:

@@ -210,7 +210,7 @@ class _MaterialChain(_JointChain):
         if self.y_complete is None:
             return il.log_likelihood_shared_sigma(th, lam, self.data, parts)
         log_sigma = self.log_sigma[:, :, walkers]
-        return censored.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum((1, 3))
+        return il.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum((1, 3))
 
     def _conditional(self, th, hyper, lam, parts, walkers=slice(None)) -> np.ndarray:
         """log p(gamma, n, s, frames | m, tau, sun weights), (E, H), for
@@ -303,7 +303,7 @@ class _MaterialChain(_JointChain):
 
         def density(th):
             if self.y_complete is not None:
-                ll = censored.entry_log_likelihood(th, self.lam, log_sigma, data, parts).sum(-1)
+                ll = il.entry_log_likelihood(th, self.lam, log_sigma, data, parts).sum(-1)
                 return ll - 0.5 * ((th[..., 2] - m) / tau) ** 2
             z, sum_log_v = il._residuals(il.predict(th, self.lam, data, parts), data, axis=-1)
             ll = np.sum(-0.5 * z * z, -1) * inv_var - sum_log_v
@@ -349,7 +349,7 @@ class _MaterialChain(_JointChain):
     def _frame_density(self, th, lam, parts, log_sigma, walkers=slice(None)):
         if self.y_complete is None:
             return super()._frame_density(th, lam, parts, log_sigma, walkers)
-        ll = censored.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum(1)
+        ll = il.entry_log_likelihood(th, lam, log_sigma, self.data, parts).sum(1)
         return ll + self._frame_prior(lam, walkers)
 
     def _frame_prior(self, lam, walkers=slice(None), hyper=None):
@@ -430,8 +430,8 @@ class _MaterialChain(_JointChain):
             cur = il.frame_log_likelihood(th, self.lam, log_sigma, self.data, parts)
             new = il.frame_log_likelihood(th, prop, log_sigma, self.data, parts)
         else:
-            cur = censored.entry_log_likelihood(th, self.lam, log_sigma, self.data, parts).sum(1)
-            new = censored.entry_log_likelihood(th, prop, log_sigma, self.data, parts).sum(1)
+            cur = il.entry_log_likelihood(th, self.lam, log_sigma, self.data, parts).sum(1)
+            new = il.entry_log_likelihood(th, prop, log_sigma, self.data, parts).sum(1)
         ok = np.log(rng.random(new.shape)) < new - cur
         self.lam = np.where(ok[..., None], prop, self.lam)
         self.accepted["sun jump"] += ok.mean()
