@@ -255,6 +255,7 @@ def _estimate(args: argparse.Namespace) -> int:
         occluder_albedo=args.occluder_albedo,
         ground_facing=args.ground_facing,
         overcast_variants=args.overcast_variants,
+        perez_families=args.perez_families,
         unreliable_loo=args.unreliable_loo or "equal",
         ground_shadow=args.ground_shadow,
         clipped=args.clipped,
@@ -389,6 +390,7 @@ def _estimate_many(args, progress) -> int:
                 **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
                 **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
                 **({"overcast_variants": True} if args.overcast_variants else {}),
+                **({"perez_families": True} if args.perez_families else {}),
                 **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
                 **({"ground_shadow": args.ground_shadow} if args.ground_shadow else {}),
                 **({"clipped": args.clipped} if args.clipped else {}),
@@ -559,7 +561,7 @@ def _parser() -> argparse.ArgumentParser:
     from .object_shadow import GROUND_SHADOWS
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
     from .render import OCCLUDER_REFLECTANCE
-    from .sky_families import OVERCAST_VARIANTS, UNRELIABLE_LOO_SHARE
+    from .sky_families import OVERCAST_VARIANTS, PEREZ_FAMILIES, UNRELIABLE_LOO_SHARE
 
     p = argparse.ArgumentParser(prog="bayesgloss", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -695,6 +697,14 @@ def _parser() -> argparse.ArgumentParser:
         f"also fit the overcast shapes {', '.join(OVERCAST_VARIANTS)}, their weight shared "
         "by pseudo-BMA+ (bayesgloss.sky_families; opt-in: on two unseen sets of sunless "
         "days it held the truth as often as the default, with a higher MAE)",
+    )
+    es.add_argument(
+        "--perez-families",
+        action="store_true",
+        help="with the sky families (the default sky): also fit the clear-sky Perez shapes "
+        f"{', '.join(PEREZ_FAMILIES)} (a clean and a hazy day's, Linke turbidity 3 and "
+        f"{sky.TURBID_LINKE_TURBIDITY:g}), stacked with the others (bayesgloss.sky_families; "
+        "opt-in until an unseen holdout judges it)",
     )
     es.add_argument(
         "--unreliable-loo",

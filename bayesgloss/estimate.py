@@ -226,6 +226,7 @@ def estimate_bundle(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
+    perez_families: bool = False,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,
@@ -293,6 +294,11 @@ def estimate_bundle(
     overcast_variants : bool
         With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
         where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
+    perez_families : bool
+        With the sky families: also the clear-sky Perez shapes of
+        :data:`~bayesgloss.sky_families.PEREZ_FAMILIES` (a clean and a hazy
+        day's), each all day, screened and stacked with the others (opt-in
+        until an unseen holdout judges it: studies/README.md, holdout 11).
     unreliable_loo : {"equal", "stack"}
         With the sky families, where the stacking weights rest on unreliable
         PSIS-LOO: equal weights, the default (flagged
@@ -340,6 +346,11 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    if perez_families and illumination != "families":
+        raise ValueError(
+            f"the Perez sky families are candidates of the sky families' stack "
+            f"(illumination 'families'), not of illumination {illumination!r}"
+        )
     lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh, illumination)
     lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
@@ -378,6 +389,7 @@ def estimate_bundle(
             jobs,
             overcast_variants=overcast_variants,
             unreliable_loo=unreliable_loo,
+            perez_families=perez_families,
         )
         families = info.pop("sky_families", None)
         part = key, info[key]
@@ -390,7 +402,10 @@ def estimate_bundle(
     elif illumination == "families":
         data = (b, curves, y, usable, censored, keep, seed, sampler_options, progress, jobs)
         idata, samples, used, families = sky_families.fit_families(
-            *data, overcast_variants=overcast_variants, unreliable_loo=unreliable_loo
+            *data,
+            overcast_variants=overcast_variants,
+            unreliable_loo=unreliable_loo,
+            perez_families=perez_families,
         )
         run = {
             "seconds": families.pop("seconds"),
@@ -595,6 +610,7 @@ def estimate_unit(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
+    perez_families: bool = False,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,
@@ -608,7 +624,7 @@ def estimate_unit(
     planned, makes the unit's key follow the bundle's content (a bundle
     whose frames were replaced is a new unit, not a finished one); a bundle
     changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
-    ``ground_facing``, ``overcast_variants``, ``unreliable_loo`` and
+    ``ground_facing``, ``overcast_variants``, ``perez_families``, ``unreliable_loo`` and
     ``ground_shadow`` and ``clipped``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
@@ -633,6 +649,7 @@ def estimate_unit(
         occluder_albedo=occluder_albedo,
         ground_facing=ground_facing,
         overcast_variants=overcast_variants,
+        perez_families=perez_families,
         unreliable_loo=unreliable_loo,
         ground_shadow=ground_shadow,
         clipped=clipped,

@@ -90,7 +90,10 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
                 "(DNI and DHI, or GHI) for every frame with the sun up"
             )
         return day
-    return sky.daylight(illumination, b.sun_direction, ground_reflectance=ground_reflectance)
+    options = {"ground_reflectance": ground_reflectance}
+    if illumination.startswith("perez"):  # a clear-sky Perez model: the date's sun distance
+        options["day_of_year"] = np.asarray(b.times.day_of_year, dtype=float)
+    return sky.daylight(illumination, b.sun_direction, **options)
 
 
 def joint_inputs(

@@ -93,6 +93,7 @@ __all__ = [
     "FAMILIES",
     "OVERCAST_VARIANTS",
     "OVERCAST_GROUP",
+    "PEREZ_FAMILIES",
     "share_within",
     "UNRELIABLE_LOO_SHARE",
     "high_k_share",
@@ -129,6 +130,18 @@ FAMILIES = ("auto", *AUTO_SKIES)
 #: sunless Radiance days) it held the truth as often as the default but its
 #: MAE was higher (0.118 against 0.102 on holdout 5, with the weight shared).
 OVERCAST_VARIANTS = ("cie-3", "gensky-uniform")
+
+#: Clear-sky Perez shapes fitted as well with ``perez_families``
+#: (``estimate --perez-families``, opt-in until a holdout judges it): the
+#: Perez (1993) sky of pvlib's Ineichen clear-sky irradiance at Linke
+#: turbidity 3 (a clean day) and :data:`bayesgloss.sky.TURBID_LINKE_TURBIDITY`
+#: (a hazy one), each all day with each frame's brightnesses inferred. Perez
+#: days otherwise go to gensky's clear sky (hazy ones: 6 of 6 on holdouts 8
+#: and 9), whose circumsolar region is narrower than a hazy day's; on seen
+#: data a smooth metal under a hazy Perez sky read 0.548 under its own sky
+#: with Ward's lobe, 0.445 under gensky's clear one (truth 0.645;
+#: ``studies/README.md``, stop 42).
+PEREZ_FAMILIES = ("perez", "perez-turbid")
 
 #: The largest :func:`high_k_share` at which the stacking weights are
 #: trusted (:func:`equal_when_unreliable`): one entry in ten. Vehtari et al.
@@ -490,6 +503,7 @@ def fit_families(
     jobs=1,
     overcast_variants=False,
     unreliable_loo="equal",
+    perez_families=False,
 ):
     """:func:`~bayesgloss.joint_estimate.joint_fit` under each of :data:`FAMILIES`,
     stacked (module docstring).
@@ -507,7 +521,8 @@ def fit_families(
     rest on (``high_k_share``). Every family is first run to its first
     check of the stopping rule; those far behind there are kept as they are
     (:func:`far_behind`, :func:`_fit_screened`; ``options["screen_families"]
-    = False`` runs all in full).
+    = False`` runs all in full). ``perez_families``: also fit
+    :data:`PEREZ_FAMILIES`, screened and stacked with the others.
 
     Returns
     -------
@@ -533,8 +548,9 @@ def fit_families(
     if unreliable_loo not in ("stack", "equal"):
         raise ValueError(f"unreliable_loo must be 'stack' or 'equal', not {unreliable_loo!r}")
     args = (b, curves, y, usable, censored, keep)
+    names = FAMILIES + (PEREZ_FAMILIES if perez_families else ())
     fits, stopped, scores = _fit_screened(
-        FAMILIES, args, seed, options, progress, jobs, unreliable_loo
+        names, args, seed, options, progress, jobs, unreliable_loo
     )
     scores = scores or loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
     if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) == "gensky-overcast":

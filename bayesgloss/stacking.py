@@ -202,6 +202,7 @@ def fit_stacked(
     jobs=1,
     overcast_variants=False,
     unreliable_loo="equal",
+    perez_families=False,
     ties="stacking",
     sunless_default=False,
 ) -> StackedFits:
@@ -231,7 +232,7 @@ def fit_stacked(
         Called with (fits done, fits) for the fits under the chosen sky.
     jobs : int
         Fits at once in worker processes.
-    overcast_variants, unreliable_loo
+    overcast_variants, unreliable_loo, perez_families
         As :func:`bayesgloss.sky_families.fit_families`' (the sky's stack).
     ties : {"stacking", "spread"}
         The stacking weights as they are, or with the choices tied with the
@@ -267,6 +268,7 @@ def fit_stacked(
             jobs,
             overcast_variants=overcast_variants,
             unreliable_loo=unreliable_loo,
+            perez_families=perez_families,
         )
         sky_info = first[3]
         seconds += sky_info.pop("seconds")

@@ -61,6 +61,7 @@ SETS = {
     "validation_holdout8": "validation_holdout8",
     "validation_holdout9": "validation_holdout9",
     "validation_holdout10": "validation_holdout10",
+    "validation_holdout11": "validation_holdout11",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -72,7 +73,7 @@ RESULTS = HERE / "results"
 QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
-    "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped",
+    "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
 )  # fmt: skip
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 ESTIMATES = {
@@ -100,6 +101,14 @@ ESTIMATES = {
         "lobe": "materials",
         "clipped": "likelihood",
     },
+    # the default of stop 42 with the clear-sky Perez shapes in the sky's stack
+    # (bayesgloss.sky_families.PEREZ_FAMILIES)
+    "perez": {
+        "per_frame": True,
+        "illumination": "families",
+        "lobe": "materials",
+        "perez_families": True,
+    },
 }
 #: Methods scored by default on a set that has none cached (``--methods``).
 DEFAULT_METHODS = {
@@ -114,6 +123,7 @@ DEFAULT_METHODS = {
     "validation_holdout8": ("baseline", "families", "materials"),
     "validation_holdout9": ("baseline", "families", "materials"),
     "validation_holdout10": ("baseline", "materials", "clipped"),
+    "validation_holdout11": ("baseline", "materials", "perez"),
 }
 
 

@@ -8,6 +8,7 @@ cited where used.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 import subprocess
@@ -707,6 +708,42 @@ def test_gendaylit_parameters_match_gendaylit_dates():
         # the sun comes from gendaylit's 6-decimal print: its zenith angle is
         # known to ~1e-6 rad, and c varies by up to ~30 per radian
         _compare_gendaylit(p, parsed, coefficient_atol=5e-5)
+
+
+def _first_frame(p):
+    """The first frame's :class:`bayesgloss.sky.GendaylitParameters` of a daylight's."""
+    fields = {f.name: getattr(p, f.name) for f in dataclasses.fields(p)}
+    first = {k: v[0] for k, v in fields.items() if isinstance(v, np.ndarray)}
+    first["coefficients"] = type(p.coefficients)(*(c[0] for c in p.coefficients))
+    return dataclasses.replace(p, **first)
+
+
+@pytest.mark.radiance
+@needs_radiance
+def test_perez_turbid_is_gendaylit_of_pvlib_clear_sky_at_linke_6():
+    """ "perez-turbid" is gendaylit -W of pvlib's Ineichen clear sky at Linke
+    turbidity 6, computed here from pvlib directly (Kasten-Young air mass,
+    Spencer's Earth-sun distance); a hazier day than "perez" (Linke 3): less
+    direct light, more diffuse, and a lower clearness epsilon."""
+    import pvlib
+
+    for alt, az in [(12.0, -100.0), (35.0, 30.0), (68.0, 0.0)]:
+        zenith = 90.0 - alt
+        air_mass = pvlib.atmosphere.get_absolute_airmass(
+            pvlib.atmosphere.get_relative_airmass(zenith, model="kastenyoung1989")
+        )
+        extra = pvlib.irradiance.get_extra_radiation(0, solar_constant=1367.0, method="spencer")
+        clear = pvlib.clearsky.ineichen(zenith, air_mass, 6.0, dni_extra=extra)
+        dni, dhi = float(clear["dni"]), float(clear["dhi"])
+        parsed = _parse_sky(
+            _radiance("gendaylit", "-ang", str(alt), str(az), "-W", f"{dni:.6f}", f"{dhi:.6f}")
+        )
+        d = sky.daylight("perez-turbid", _gensky_direction(alt, az), day_of_year=0)
+        assert d.model == "perez-turbid"
+        _compare_gendaylit(_first_frame(d.parameters), parsed)
+        clean = sky.daylight("perez", _gensky_direction(alt, az), day_of_year=0).parameters
+        assert d.parameters.epsilon < clean.epsilon
+        assert d.parameters.solar_radiance < clean.solar_radiance
 
 
 @pytest.mark.radiance

@@ -237,6 +237,64 @@ def test_cli_carries_overcast_variants_to_the_estimate(tmp_path, monkeypatch):
     assert route["estimate_bundle"] == [True, False, True]
 
 
+def test_perez_families_are_fitted_and_stacked_only_when_asked(monkeypatch):
+    # data best predicted by the turbid Perez sky: asked for, the Perez
+    # shapes are fitted after the four and the turbid one takes the weight
+    # and answers; not asked for, the four only (the clear sky then wins)
+    args = (None,) * 6 + (0, {})
+    densities = {"perez-turbid": -1.0, "gensky-clear": -2.0}
+    calls = _fake_family_fits(monkeypatch, densities)
+    idata, _, _, fam = sky_families.fit_families(*args, perez_families=True)
+    assert calls == [*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES]
+    assert fam["most_weight"] == "perez-turbid"
+    assert fam["families"]["perez-turbid"]["weight"] > 0.99
+    assert np.all(idata.posterior["gamma_object"].values == pytest.approx(0.6))  # its own draws
+    calls.clear()
+    _, _, _, fam = sky_families.fit_families(*args)
+    assert calls == list(sky_families.FAMILIES)
+    assert fam["most_weight"] == "gensky-clear"
+
+
+def test_perez_families_sky_is_the_clear_sky_perez_of_the_bundle_date(tmp_path):
+    # the joint model's sky for a Perez family: the Perez sky of the
+    # clear-sky irradiance on the bundle's own dates (the Earth-sun
+    # distance), not of day 0
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss import bundle as bundle_io
+    from bayesgloss import sky
+    from bayesgloss.joint_estimate import bundle_sky
+
+    b = bundle_io.read_bundle(make_synthetic_bundle(tmp_path / "b"))
+    for name in sky_families.PEREZ_FAMILIES:
+        day = bundle_sky(b, name, 0.2)
+        assert day.model == name
+        want = sky.daylight(name, b.sun_direction, day_of_year=b.times.day_of_year)
+        np.testing.assert_allclose(day.solar_radiance, want.solar_radiance)
+        jan = sky.daylight(name, b.sun_direction, day_of_year=1)
+        up = b.sun_up
+        assert not np.allclose(day.solar_radiance[up], jan.solar_radiance[up], rtol=1e-3)
+
+
+def test_perez_families_need_the_sky_families(tmp_path):
+    from conftest import make_synthetic_bundle
+
+    from bayesgloss.estimate import estimate_bundle
+
+    path = make_synthetic_bundle(tmp_path / "b")
+    with pytest.raises(ValueError, match="Perez sky families.*'gensky-clear'"):
+        estimate_bundle(path, illumination="gensky-clear", per_frame=True, perez_families=True)
+
+
+def test_cli_carries_perez_families_to_the_estimate(tmp_path, monkeypatch):
+    from conftest import estimate_option_route
+
+    route = estimate_option_route(monkeypatch, tmp_path, ["--perez-families"], "perez_families")
+    assert route["units"] == [True, True]
+    assert not route["plain_units_have_key"]
+    assert route["estimate_bundle"] == [True, False, True]
+
+
 def test_tied_overcast_shapes_share_their_weight(monkeypatch):
     # the three overcast shapes predict every entry almost equally well (a
     # sunless day whose gradation the facets do not tell): the uniform sky
