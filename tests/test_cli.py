@@ -184,6 +184,17 @@ def test_readme_command_table_is_the_command_line(capsys):
         assert f"usage: bayesgloss {command}" in capsys.readouterr().out
 
 
+def test_readme_documents_every_estimate_option():
+    # a newcomer reads estimate's options in one table: each option of the
+    # parser is named in the README's section on them
+    text = (ROOT / "README.md").read_text()
+    section = text.split("### What `estimate` fits, and its options", 1)[1].split("\n## ", 1)[0]
+    estimate = cli._parser()._subparsers._group_actions[0].choices["estimate"]
+    options = [a.option_strings[0] for a in estimate._actions if a.option_strings]
+    missing = [o for o in options if o != "-h" and f"`{o}" not in section]
+    assert not missing, missing
+
+
 # -- result folders: checked first, written as one set, read back checked ---------
 
 
