@@ -66,7 +66,10 @@ DEFAULT_LOBE_FAMILY = "phong"
 #: (censored: only a lower bound known): ``"drop"`` leaves them out (the
 #: model until stop 42: biased where the clipped entries are the glossy
 #: peaks), ``"likelihood"`` keeps them with the noise's survival function at
-#: the bound (:mod:`bayesgloss.sampling.censored`).
+#: the bound (:mod:`bayesgloss.sampling.censored`). ``"drop"`` stays the
+#: default: on the unseen holdout 10 the two read alike (sun-lit MAE 0.072
+#: and 0.073; 0.0381 and 0.0385 on the 11 sequences with clipped entries),
+#: the likelihood at 1.4 times the time (studies/README.md).
 CLIPPED = ("drop", "likelihood")
 DEFAULT_CLIPPED = "drop"
 
