@@ -5,8 +5,8 @@ coverage to mean much (issue "Gloss that means the material's gloss" asks
 for 85-97 % per renderer and class). This pools the committed scores of
 the holdouts scored with one estimator (``--radiance``, ``--mitsuba``:
 names of ``validate_radiance.SETS``; defaults, the sets scored with today's
-default: Radiance holdouts 8 and 9, Mitsuba holdout 2 and, once scored in
-full, 3) and draws nominal against observed coverage of the central
+default: Radiance holdouts 8, 9 and 10 (holdout 10 scored the lobe stack,
+today's default, only), Mitsuba holdouts 2 and 3) and draws nominal against observed coverage of the central
 intervals per class (``validate_radiance.calibration_figure``: each
 score's PIT, the reported posterior's CDF at the truth, with the model's
 error), with the 90 % interval's cover and its binomial 90 % range beside.
@@ -32,7 +32,7 @@ from validate_radiance import RESULTS, SETS, _holds, calibration_figure
 #: Mitsuba holdout 3 scored only in part is left out (its results say how
 #: many of its bundles were scored; see ``complete``).
 DEFAULT_SETS = {
-    "radiance": ("validation_holdout8", "validation_holdout9"),
+    "radiance": ("validation_holdout8", "validation_holdout9", "validation_holdout10"),
     "mitsuba": ("mitsuba_holdout2", "mitsuba_holdout3"),
 }
 #: Sequences in each set (a set whose results hold fewer is partly scored).
