@@ -255,6 +255,31 @@ def test_perez_families_are_fitted_and_stacked_only_when_asked(monkeypatch):
     assert fam["most_weight"] == "gensky-clear"
 
 
+def test_a_hazy_perez_day_is_told_hazy_perez(tmp_path):
+    # a small bundle made by the forward model under the turbid Perez sky:
+    # asked for, the Perez families are fitted and the turbid one carries
+    # the weight (the shapes differ most in the circumsolar region, which a
+    # glossy facet's curve samples near its mirror frame)
+    from conftest import make_synthetic_bundle
+
+    path = make_synthetic_bundle(
+        tmp_path / "b", specularity=0.5, noise=0.01, seed=6, sky_model="perez-turbid"
+    )
+    res = estimate.estimate_bundle(
+        path,
+        per_frame=True,
+        illumination="families",
+        lobe="phong",
+        perez_families=True,
+        jobs=2,
+        sampler_options={"max_steps": 400},
+    )
+    fam = res.summary["sky_families"]
+    assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
+    assert fam["most_weight"] == "perez-turbid", fam
+    assert fam["families"]["perez-turbid"]["weight"] > 0.8, fam
+
+
 def test_perez_families_sky_is_the_clear_sky_perez_of_the_bundle_date(tmp_path):
     # the joint model's sky for a Perez family: the Perez sky of the
     # clear-sky irradiance on the bundle's own dates (the Earth-sun
