@@ -390,7 +390,11 @@ def _estimate_many(args, progress) -> int:
                 **({"occluder_albedo": args.occluder_albedo} if args.occluder_albedo else {}),
                 **({"ground_facing": args.ground_facing} if args.ground_facing else {}),
                 **({"overcast_variants": True} if args.overcast_variants else {}),
-                **({"perez_families": True} if args.perez_families else {}),
+                **(
+                    {"perez_families": args.perez_families}
+                    if args.perez_families is not None
+                    else {}
+                ),
                 **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
                 **({"ground_shadow": args.ground_shadow} if args.ground_shadow else {}),
                 **({"clipped": args.clipped} if args.clipped else {}),
@@ -700,11 +704,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     es.add_argument(
         "--perez-families",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
+        default=None,
         help="with the sky families (the default sky): also fit the clear-sky Perez shapes "
         f"{', '.join(PEREZ_FAMILIES)} (a clean and a hazy day's, Linke turbidity 3 and "
-        f"{sky.TURBID_LINKE_TURBIDITY:g}), stacked with the others (bayesgloss.sky_families; "
-        "opt-in until an unseen holdout judges it)",
+        f"{sky.TURBID_LINKE_TURBIDITY:g}), stacked with the others (the default since stop "
+        "43, bayesgloss.sky_families; --no-perez-families: the four without them)",
     )
     es.add_argument(
         "--unreliable-loo",

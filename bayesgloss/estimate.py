@@ -226,7 +226,7 @@ def estimate_bundle(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
-    perez_families: bool = False,
+    perez_families: bool | None = None,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,
@@ -294,11 +294,13 @@ def estimate_bundle(
     overcast_variants : bool
         With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
         where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
-    perez_families : bool
+    perez_families : bool, optional
         With the sky families: also the clear-sky Perez shapes of
         :data:`~bayesgloss.sky_families.PEREZ_FAMILIES` (a clean and a hazy
-        day's), each all day, screened and stacked with the others (opt-in
-        until an unseen holdout judges it: studies/README.md, holdout 11).
+        day's), each all day, screened and stacked with the others. Default
+        :data:`~bayesgloss.sky_families.DEFAULT_PEREZ_FAMILIES` (True since
+        stop 43: studies/README.md, holdout 11) with the sky families, and
+        False under any other illumination.
     unreliable_loo : {"equal", "stack"}
         With the sky families, where the stacking weights rest on unreliable
         PSIS-LOO: equal weights, the default (flagged
@@ -346,6 +348,8 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
+    if perez_families is None:
+        perez_families = sky_families.DEFAULT_PEREZ_FAMILIES and illumination == "families"
     if perez_families and illumination != "families":
         raise ValueError(
             f"the Perez sky families are candidates of the sky families' stack "
@@ -610,7 +614,7 @@ def estimate_unit(
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
     overcast_variants: bool = False,
-    perez_families: bool = False,
+    perez_families: bool | None = None,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,

@@ -202,7 +202,7 @@ def fit_stacked(
     jobs=1,
     overcast_variants=False,
     unreliable_loo="equal",
-    perez_families=False,
+    perez_families=sky_families.DEFAULT_PEREZ_FAMILIES,
     ties="stacking",
     sunless_default=False,
 ) -> StackedFits:

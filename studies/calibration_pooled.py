@@ -6,7 +6,8 @@ for 85-97 % per renderer and class). This pools the committed scores of
 the holdouts scored with one estimator (``--radiance``, ``--mitsuba``:
 names of ``validate_radiance.SETS``; defaults, the sets scored with today's
 default: Radiance holdouts 8, 9 and 10 (holdout 10 scored the lobe stack,
-today's default, only), Mitsuba holdouts 2 and 3) and draws nominal against observed coverage of the central
+today's default, only), Mitsuba holdouts 2 and 3) and draws nominal against
+observed coverage of the central
 intervals per class (``validate_radiance.calibration_figure``: each
 score's PIT, the reported posterior's CDF at the truth, with the model's
 error), with the 90 % interval's cover and its binomial 90 % range beside.

@@ -65,7 +65,7 @@ def test_overcast_day_is_told_overcast(tmp_path, capsys):
         sampler_options={"max_steps": 400},
     )
     fam = res.summary["sky_families"]
-    assert set(fam["families"]) == set(sky_families.FAMILIES)
+    assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
     assert fam["most_weight"] == "gensky-overcast"
     weights = {name: f["weight"] for name, f in fam["families"].items()}
     assert sum(weights.values()) == pytest.approx(1.0)
@@ -173,7 +173,7 @@ def test_families_far_behind_are_kept_at_their_first_check(monkeypatch):
     densities = {"gensky-clear": -5.0, "gensky-overcast": -19.0}
     log = []
     _fake_family_fits(monkeypatch, densities, unconverged=unconverged, log=log)
-    _, _, _, fam = sky_families.fit_families(*args)
+    _, _, _, fam = sky_families.fit_families(*args, perez_families=False)
     first = first_check()
     assert log[:4] == [(name, first, False) for name in sky_families.FAMILIES]
     assert sorted(log[4:]) == [("auto", None, True), ("gensky-intermediate", None, True)]
@@ -185,7 +185,9 @@ def test_families_far_behind_are_kept_at_their_first_check(monkeypatch):
     # screen_families=False: every family run in full, once
     log.clear()
     _fake_family_fits(monkeypatch, densities, unconverged=unconverged, log=log)
-    _, _, _, fam = sky_families.fit_families(*args[:-1], {"screen_families": False})
+    _, _, _, fam = sky_families.fit_families(
+        *args[:-1], {"screen_families": False}, perez_families=False
+    )
     assert log == [(name, None, False) for name in sky_families.FAMILIES]
     assert fam["stopped_early"] == []
 
@@ -194,7 +196,7 @@ def test_families_far_behind_are_kept_at_their_first_check(monkeypatch):
     log.clear()
     spread = dict.fromkeys(sky_families.FAMILIES, 5.0)
     _fake_family_fits(monkeypatch, densities, spread, unconverged=unconverged, log=log)
-    _, _, _, fam = sky_families.fit_families(*args)
+    _, _, _, fam = sky_families.fit_families(*args, perez_families=False)
     assert fam["stopped_early"] == [] and fam["equal_weights"]
     assert sorted(n for n, _, resumed in log if resumed) == sorted(unconverged)
 
@@ -206,19 +208,21 @@ def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypat
     # variants always, never, or did not restack would fail one of these)
     args = (None,) * 6 + (0, {})
     calls = _fake_family_fits(monkeypatch, {"gensky-uniform": -1.0, "gensky-overcast": -2.0})
-    idata, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    idata, _, _, fam = sky_families.fit_families(
+        *args, overcast_variants=True, perez_families=False
+    )
     assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
     assert fam["most_weight"] == "gensky-uniform"
     assert fam["families"]["gensky-uniform"]["weight"] > 0.99
     assert np.all(idata.posterior["gamma_object"].values == pytest.approx(0.6))  # its own draws
     # the option off: the four only, the overcast sky chosen
     calls.clear()
-    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=False)
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=False, perez_families=False)
     assert calls == list(sky_families.FAMILIES)
     assert fam["most_weight"] == "gensky-overcast"
     # a sun-lit day (the clear sky wins): the variants are not fitted, whatever the option
     calls = _fake_family_fits(monkeypatch, {"gensky-clear": -1.0, "gensky-uniform": 0.0})
-    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
     assert calls == list(sky_families.FAMILIES)
     assert set(fam["families"]) == set(sky_families.FAMILIES)
 
@@ -237,7 +241,7 @@ def test_cli_carries_overcast_variants_to_the_estimate(tmp_path, monkeypatch):
     assert route["estimate_bundle"] == [True, False, True]
 
 
-def test_perez_families_are_fitted_and_stacked_only_when_asked(monkeypatch):
+def test_perez_families_are_fitted_and_stacked_unless_left_out(monkeypatch):
     # data best predicted by the turbid Perez sky: asked for, the Perez
     # shapes are fitted after the four and the turbid one takes the weight
     # and answers; not asked for, the four only (the clear sky then wins)
@@ -250,9 +254,14 @@ def test_perez_families_are_fitted_and_stacked_only_when_asked(monkeypatch):
     assert fam["families"]["perez-turbid"]["weight"] > 0.99
     assert np.all(idata.posterior["gamma_object"].values == pytest.approx(0.6))  # its own draws
     calls.clear()
-    _, _, _, fam = sky_families.fit_families(*args)
+    _, _, _, fam = sky_families.fit_families(*args, perez_families=False)
     assert calls == list(sky_families.FAMILIES)
     assert fam["most_weight"] == "gensky-clear"
+    # the default (since holdout 11): the six
+    calls.clear()
+    _, _, _, fam = sky_families.fit_families(*args)
+    assert sky_families.DEFAULT_PEREZ_FAMILIES
+    assert calls == [*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES]
 
 
 def test_a_hazy_perez_day_is_told_hazy_perez(tmp_path):
@@ -314,10 +323,18 @@ def test_perez_families_need_the_sky_families(tmp_path):
 def test_cli_carries_perez_families_to_the_estimate(tmp_path, monkeypatch):
     from conftest import estimate_option_route
 
+    # the flag named either way reaches the estimate and each unit's key; not
+    # named, the estimate takes its default (None: the Perez shapes with the
+    # sky families) and the units' keys stay those of earlier runs
     route = estimate_option_route(monkeypatch, tmp_path, ["--perez-families"], "perez_families")
     assert route["units"] == [True, True]
     assert not route["plain_units_have_key"]
-    assert route["estimate_bundle"] == [True, False, True]
+    assert route["estimate_bundle"] == [True, None, True]
+    route = estimate_option_route(
+        monkeypatch, tmp_path / "no", ["--no-perez-families"], "perez_families"
+    )
+    assert route["units"] == [False, False]
+    assert route["estimate_bundle"] == [False, None, False]
 
 
 def test_tied_overcast_shapes_share_their_weight(monkeypatch):
@@ -331,7 +348,9 @@ def test_tied_overcast_shapes_share_their_weight(monkeypatch):
     args = (None,) * 6 + (0, {})
     near = {"gensky-overcast": -1.002, "cie-3": -1.001, "gensky-uniform": -1.0}
     calls = _fake_family_fits(monkeypatch, near)
-    idata, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    idata, _, _, fam = sky_families.fit_families(
+        *args, overcast_variants=True, perez_families=False
+    )
     assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
     w = [fam["families"][name]["weight"] for name in sky_families.OVERCAST_GROUP]
     np.testing.assert_allclose(w, 1 / 3, atol=0.01)
@@ -341,7 +360,7 @@ def test_tied_overcast_shapes_share_their_weight(monkeypatch):
     np.testing.assert_allclose(np.unique(gamma.round(9)), [0.4, 0.5, 0.6])
     # members far apart keep the better one's weight: 12 entries 1 nat apart each
     calls = _fake_family_fits(monkeypatch, {**near, "gensky-uniform": 0.0})
-    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True)
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
     assert fam["families"]["gensky-uniform"]["weight"] > 0.99
 
 
@@ -373,14 +392,16 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
     args = (None,) * 6 + (0, {})
     spread = dict.fromkeys(sky_families.FAMILIES, 5.0)
     _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
-    _, _, _, kept = sky_families.fit_families(*args, unreliable_loo="stack")
+    _, _, _, kept = sky_families.fit_families(*args, unreliable_loo="stack", perez_families=False)
     assert kept["high_k_share"] > 0.5
     assert not kept["equal_weights"]
     assert sky_families.stack_flags(kept) == ["loo-unreliable"]
     assert kept["families"]["gensky-clear"]["weight"] > 0.5  # the most, though noisy
 
     _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
-    idata, _, _, equal = sky_families.fit_families(*args, unreliable_loo="equal")
+    idata, _, _, equal = sky_families.fit_families(
+        *args, unreliable_loo="equal", perez_families=False
+    )
     assert equal["equal_weights"]
     assert equal["most_weight"] == "gensky-clear"  # by its stacking weight
     assert [f["weight"] for f in equal["families"].values()] == [0.25] * 4
@@ -393,12 +414,12 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
     # reliable entries (sd 0.05 over the draws: k well below 0.7): "equal"
     # keeps the stacking weights, no flag
     _fake_family_fits(monkeypatch, {"gensky-clear": -5.0})
-    _, _, _, fam = sky_families.fit_families(*args, unreliable_loo="equal")
+    _, _, _, fam = sky_families.fit_families(*args, unreliable_loo="equal", perez_families=False)
     assert fam["high_k_share"] == 0.0 and not fam["equal_weights"]
     assert fam["families"]["gensky-clear"]["weight"] > 0.99
     assert sky_families.stack_flags(fam) == []
     with pytest.raises(ValueError, match="unreliable_loo"):
-        sky_families.fit_families(*args, unreliable_loo="pseudo-bma")
+        sky_families.fit_families(*args, unreliable_loo="pseudo-bma", perez_families=False)
 
 
 def test_cli_carries_unreliable_loo_to_the_estimate(tmp_path, monkeypatch):
