@@ -18,26 +18,15 @@ exposure) inferred with them; the posterior groups hold ``gamma_object``,
 clear, dimmed and hidden sun). Each facet's own posterior (``gamma``...)
 is its sampler's given the object's illumination, averaged over it
 (:func:`bayesgloss.sampling.facets_given_frames`). Where no sky is named,
-that model is fitted four times, under the per-frame mixture of sky
-shapes and under each of gensky's clear, intermediate and overcast skies
-all day, and the object's gamma and n are the fits' mixture with their
-PSIS-LOO stacking weights (:mod:`bayesgloss.sky_families`; the facets'
-and frames' answers are the most-weighted fit's). The glossy lobe is
-averaged likewise (``lobe="materials"``, the default since stop 42): the
-lobes of :mod:`bayesgloss.lobes` (Phong, Ward, GGX) and GGX with Schlick's
-Fresnel, fitted under the most-weighted sky and stacked
-(:mod:`bayesgloss.lobe_families`; Phong alone on an overcast day). Not a
-facet population's mu: on overcast days the facets' posteriors share the
-frames, and their product read confident answers the data did not hold.
+that model is fitted under each sky family of :mod:`bayesgloss.sky_families`
+and the fits stacked by PSIS-LOO; the glossy lobe likewise under the
+most-weighted family (``lobe="materials"``, :mod:`bayesgloss.lobe_families`).
+Not a facet population's mu: on overcast days the facets' posteriors share
+the frames, and their product read confident answers the data did not hold.
 
-With fixed brightness (``per_frame=False``; the facets sampled on their own,
-:mod:`bayesgloss.facets_estimate`), object-level gloss, beside the
-paper's average of facets: ``population`` (partial pooling, a Beta
-population of facet gammas whose mean mu is the object's gloss; priors mu
-uniform on [0, 1], log kappa uniform on [log 0.5, log 1e4]) and ``shared``
-(complete pooling: one gamma and n), both :mod:`bayesgloss.pooling`'s on a
-grid from kernel densities of the facets' draws; ``mean``, the mean over
-facets of their posterior medians (the paper's average, for comparison).
+With fixed brightness (``per_frame=False``, :mod:`bayesgloss.facets_estimate`)
+the facets are sampled on their own and pooled by :mod:`bayesgloss.pooling`
+(``population``, ``shared``; ``mean``, the paper's average of facets).
 
 Illumination models (``illumination=``, :data:`ILLUMINATION_MODELS`): the
 sky models of :func:`bayesgloss.sky.sky_models` (``"point-sun"``, the
@@ -295,12 +284,8 @@ def estimate_bundle(
         With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
         where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
     perez_families : bool, optional
-        With the sky families: also the clear-sky Perez shapes of
-        :data:`~bayesgloss.sky_families.PEREZ_FAMILIES` (a clean and a hazy
-        day's), each all day, screened and stacked with the others. Default
-        :data:`~bayesgloss.sky_families.DEFAULT_PEREZ_FAMILIES` (True since
-        stop 43: studies/README.md, holdout 11) with the sky families, and
-        False under any other illumination.
+        With the sky families: also :data:`~bayesgloss.sky_families.PEREZ_FAMILIES`
+        (:func:`~bayesgloss.sky_families.perez_families_for`; default: yes).
     unreliable_loo : {"equal", "stack"}
         With the sky families, where the stacking weights rest on unreliable
         PSIS-LOO: equal weights, the default (flagged
@@ -348,13 +333,7 @@ def estimate_bundle(
             f"illumination '{illumination}' (sky shapes inferred) needs per-frame "
             "illumination (relative noise and a known pixel response); name a sky model"
         )
-    if perez_families is None:
-        perez_families = sky_families.DEFAULT_PEREZ_FAMILIES and illumination == "families"
-    if perez_families and illumination != "families":
-        raise ValueError(
-            f"the Perez sky families are candidates of the sky families' stack "
-            f"(illumination 'families'), not of illumination {illumination!r}"
-        )
+    perez_families = sky_families.perez_families_for(illumination, perez_families)
     lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh, illumination)
     lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
     shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)

@@ -96,6 +96,7 @@ __all__ = [
     "OVERCAST_GROUP",
     "PEREZ_FAMILIES",
     "DEFAULT_PEREZ_FAMILIES",
+    "perez_families_for",
     "share_within",
     "UNRELIABLE_LOO_SHARE",
     "high_k_share",
@@ -184,6 +185,27 @@ SCREEN_WEIGHT = 0.01
 #: The overcast shapes as one group: their stacking weight's total shared by
 #: pseudo-BMA+ (:func:`share_within`).
 OVERCAST_GROUP = ("gensky-overcast", *OVERCAST_VARIANTS)
+
+
+def perez_families_for(illumination: str, perez_families: bool | None) -> bool:
+    """Whether an estimate under ``illumination`` fits :data:`PEREZ_FAMILIES`:
+    ``perez_families`` where given, else :data:`DEFAULT_PEREZ_FAMILIES` under
+    the sky families (``"families"``) and no under any other illumination.
+
+    Raises
+    ------
+    ValueError
+        Where they are asked for under another illumination (they are
+        candidates of the sky families' stack only).
+    """
+    if perez_families is None:
+        return DEFAULT_PEREZ_FAMILIES and illumination == "families"
+    if perez_families and illumination != "families":
+        raise ValueError(
+            f"the Perez sky families are candidates of the sky families' stack "
+            f"(illumination 'families'), not of illumination {illumination!r}"
+        )
+    return bool(perez_families)
 
 
 def _pointwise(idata) -> np.ndarray:

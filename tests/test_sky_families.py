@@ -310,6 +310,15 @@ def test_perez_families_sky_is_the_clear_sky_perez_of_the_bundle_date(tmp_path):
         assert not np.allclose(day.solar_radiance[up], jan.solar_radiance[up], rtol=1e-3)
 
 
+def test_perez_families_default_to_the_sky_families_only():
+    assert sky_families.perez_families_for("families", None) is True
+    assert sky_families.perez_families_for("families", False) is False
+    assert sky_families.perez_families_for("gensky-clear", None) is False
+    assert sky_families.perez_families_for("auto", False) is False
+    with pytest.raises(ValueError, match="'auto'"):
+        sky_families.perez_families_for("auto", True)
+
+
 def test_perez_families_need_the_sky_families(tmp_path):
     from conftest import make_synthetic_bundle
 
