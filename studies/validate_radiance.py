@@ -76,75 +76,30 @@ METHODS = (
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
 )  # fmt: skip
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
-#: Every method scored before stop 43 names ``perez_families=False``: the
-#: sky families' stack of four it was scored with (the Perez shapes joined
+#: Every method scored before stop 43 fits the sky families' stack of four
+#: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
 #: the default at stop 43, after holdout 11; ``"perez"`` is that default).
+FOUR_SKY_FAMILIES = {"per_frame": True, "illumination": "families", "perez_families": False}
 ESTIMATES = {
     "fixed": {"per_frame": False},
     "per-frame": {"per_frame": True},
-    "families": {"per_frame": True, "illumination": "families", "perez_families": False},
+    "families": FOUR_SKY_FAMILIES,
     # the default with facets facing the ground kept (stop 32's change undone)
-    "ground-kept": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "ground_facing": "keep",
-    },
+    "ground-kept": {**FOUR_SKY_FAMILIES, "ground_facing": "keep"},
     # the default with CIE type 3 and a uniform sky fitted where the overcast sky wins
-    "overcast-variants": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "overcast_variants": True,
-    },
+    "overcast-variants": {**FOUR_SKY_FAMILIES, "overcast_variants": True},
     # the default with equal weights where the stack's PSIS-LOO is unreliable
-    "loo-equal": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "unreliable_loo": "equal",
-    },
-    "fresnel": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "fresnel": "radiance",
-    },
-    "schlick": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "fresnel": "schlick",
-    },
-    "lobes": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "lobe": "families",
-    },
+    "loo-equal": {**FOUR_SKY_FAMILIES, "unreliable_loo": "equal"},
+    "fresnel": {**FOUR_SKY_FAMILIES, "fresnel": "radiance"},
+    "schlick": {**FOUR_SKY_FAMILIES, "fresnel": "schlick"},
+    "lobes": {**FOUR_SKY_FAMILIES, "lobe": "families"},
     # the lobes and a dielectric coating (GGX with Schlick's Fresnel), stacked
-    "materials": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "lobe": "materials",
-    },
+    "materials": {**FOUR_SKY_FAMILIES, "lobe": "materials"},
     # the default with the convex object's shadow on the ground (bayesgloss.object_shadow)
-    "shadow": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "ground_shadow": "convex",
-    },
+    "shadow": {**FOUR_SKY_FAMILIES, "ground_shadow": "convex"},
     # the default of stop 42 (the lobe stack) with clipped entries kept as lower
     # bounds (bayesgloss.sampling.censored)
-    "clipped": {
-        "per_frame": True,
-        "illumination": "families",
-        "perez_families": False,
-        "lobe": "materials",
-        "clipped": "likelihood",
-    },
+    "clipped": {**FOUR_SKY_FAMILIES, "lobe": "materials", "clipped": "likelihood"},
     # the default since stop 43: the lobe stack, the clear-sky Perez shapes in the sky's stack
     # (bayesgloss.sky_families.PEREZ_FAMILIES)
     "perez": {

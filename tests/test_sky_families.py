@@ -40,30 +40,38 @@ def test_loo_stacking_prefers_the_model_that_predicts(tmp_path):
     assert scores["good"]["elpd_loo"] - scores["bad"]["elpd_loo"] == pytest.approx(180, rel=0.01)
 
 
-@pytest.mark.long
-def test_overcast_day_is_told_overcast(tmp_path, capsys):
-    # a small bundle made by the forward model under gensky's overcast sky: of
-    # the four candidates the overcast fit must carry the weight (a wrong
-    # family on an overcast day read gamma 0.008 for a true 0.88 on a
-    # Radiance render, stop 27, and the per-frame mixture 1.00), and the
-    # object's answer is its mixture. Two worker processes (estimate's
-    # default --jobs), the weights kept in the result folder and shown
+def _sky_families_of_a_forward_model_day(path, sky_model, **options):
+    """The sky families' stack (Phong's lobe alone: the lobe stack is
+    test_lobes') of a small bundle made at ``path`` by the forward model
+    under ``sky_model``, on two worker processes (estimate's default
+    --jobs): (bundle path, estimate)."""
     from conftest import make_synthetic_bundle
 
-    from bayesgloss import bundle as bundle_io
-    from bayesgloss import cli, report
-
-    path = make_synthetic_bundle(
-        tmp_path / "b", specularity=0.5, noise=0.01, seed=6, sky_model="gensky-overcast"
-    )
+    path = make_synthetic_bundle(path, specularity=0.5, noise=0.01, seed=6, sky_model=sky_model)
     res = estimate.estimate_bundle(
         path,
         per_frame=True,
         illumination="families",
-        lobe="phong",  # the sky families alone: the lobe stack is test_lobes'
+        lobe="phong",
         jobs=2,
         sampler_options={"max_steps": 400},
+        **options,
     )
+    return path, res
+
+
+@pytest.mark.long
+def test_overcast_day_is_told_overcast(tmp_path, capsys):
+    # a small bundle made by the forward model under gensky's overcast sky: of
+    # the six candidates the overcast fit must carry the weight (a wrong
+    # family on an overcast day read gamma 0.008 for a true 0.88 on a
+    # Radiance render, stop 27, and the per-frame mixture 1.00), and the
+    # object's answer is its mixture. Two worker processes (estimate's
+    # default --jobs), the weights kept in the result folder and shown
+    from bayesgloss import bundle as bundle_io
+    from bayesgloss import cli, report
+
+    path, res = _sky_families_of_a_forward_model_day(tmp_path / "b", "gensky-overcast")
     fam = res.summary["sky_families"]
     assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
     assert fam["most_weight"] == "gensky-overcast"
@@ -269,19 +277,8 @@ def test_a_hazy_perez_day_is_told_hazy_perez(tmp_path):
     # asked for, the Perez families are fitted and the turbid one carries
     # the weight (the shapes differ most in the circumsolar region, which a
     # glossy facet's curve samples near its mirror frame)
-    from conftest import make_synthetic_bundle
-
-    path = make_synthetic_bundle(
-        tmp_path / "b", specularity=0.5, noise=0.01, seed=6, sky_model="perez-turbid"
-    )
-    res = estimate.estimate_bundle(
-        path,
-        per_frame=True,
-        illumination="families",
-        lobe="phong",
-        perez_families=True,
-        jobs=2,
-        sampler_options={"max_steps": 400},
+    _, res = _sky_families_of_a_forward_model_day(
+        tmp_path / "b", "perez-turbid", perez_families=True
     )
     fam = res.summary["sky_families"]
     assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
