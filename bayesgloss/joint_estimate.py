@@ -94,7 +94,7 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
             )
         return day
     options = {"ground_reflectance": ground_reflectance}
-    if illumination.startswith("perez"):  # a clear-sky Perez model: the date's sun distance
+    if sky.takes_day_of_year(illumination):  # a clear-sky irradiance: the date's sun distance
         options["day_of_year"] = np.asarray(b.times.day_of_year, dtype=float)
     return sky.daylight(illumination, b.sun_direction, **options)
 

@@ -45,6 +45,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -75,6 +76,7 @@ __all__ = [
     "sky_models",
     "sun_disc",
     "sun_solid_angle",
+    "takes_day_of_year",
 ]
 
 # --- constants (Radiance src/common/color.h, gendaylit.c) -------------------
@@ -1360,12 +1362,20 @@ def _perez_builder(
 TURBID_LINKE_TURBIDITY = 6.0
 
 
-def _perez_turbid(sun_direction: Any, **options: Any) -> DaylightSky:
+def _perez_turbid(
+    sun_direction: Any,
+    *,
+    linke_turbidity: float = TURBID_LINKE_TURBIDITY,
+    day_of_year: Any = 0,
+    **options: Any,
+) -> DaylightSky:
     """The Perez sky of pvlib's Ineichen clear-sky irradiance at Linke
     turbidity :data:`TURBID_LINKE_TURBIDITY`: a cloudless hazy day's shape
     (wider, brighter circumsolar region and horizon than a clean day's)."""
-    options.setdefault("linke_turbidity", TURBID_LINKE_TURBIDITY)
-    return dataclasses.replace(_perez_builder(sun_direction, **options), model="perez-turbid")
+    day = _perez_builder(
+        sun_direction, linke_turbidity=linke_turbidity, day_of_year=day_of_year, **options
+    )
+    return dataclasses.replace(day, model="perez-turbid")
 
 
 def _cie_builder(sky_type: int) -> Callable[..., DaylightSky]:
@@ -1444,6 +1454,14 @@ _REGISTRY: dict[str, Callable[..., DaylightSky]] = {
 def sky_models() -> tuple[str, ...]:
     """Names :func:`daylight` accepts."""
     return tuple(_REGISTRY)
+
+
+def takes_day_of_year(model: str) -> bool:
+    """Whether :func:`daylight`'s ``model`` takes the option ``day_of_year``
+    (the Earth-sun distance of its clear-sky irradiance: the CIE general and
+    Perez skies; gensky's skies and the point sun have no date). A builder
+    takes it where its signature names it."""
+    return "day_of_year" in inspect.signature(_REGISTRY[model]).parameters
 
 
 def daylight(model: str, sun_direction: Any, **options: Any) -> DaylightSky:

@@ -972,3 +972,16 @@ def test_point_sun_takes_the_common_options():
     np.testing.assert_allclose(s.solar_radiance * s.sun_solid_angle, [1.0, 0.0])
     np.testing.assert_array_equal(s.ground_radiance, 0.0)
     np.testing.assert_array_equal(s.radiance(sun[:1]), 0.0)
+
+
+def test_takes_day_of_year_names_the_dated_skies():
+    # the dated skies are those whose clear-sky irradiance has the Earth-sun
+    # distance in it: building one on two dates gives two suns
+    up = np.array([[0.3, 0.2, 0.93]])
+    up = up / np.linalg.norm(up)
+    dated = [m for m in sky.sky_models() if sky.takes_day_of_year(m)]
+    assert set(dated) == {"perez", "perez-turbid", *(f"cie-{t}" for t in range(1, 16))}
+    for m in dated:
+        jan, jul = (sky.daylight(m, up, day_of_year=d) for d in (3, 185))
+        if m in ("perez", "perez-turbid") or int(m.split("-")[1]) >= 6:  # with a sun
+            assert jan.solar_radiance[0] > 1.02 * jul.solar_radiance[0]

@@ -297,7 +297,7 @@ def test_perez_families_sky_is_the_clear_sky_perez_of_the_bundle_date(tmp_path):
     from bayesgloss.joint_estimate import bundle_sky
 
     b = bundle_io.read_bundle(make_synthetic_bundle(tmp_path / "b"))
-    for name in sky_families.PEREZ_FAMILIES:
+    for name in (*sky_families.PEREZ_FAMILIES, "cie-7", "cie-12"):
         day = bundle_sky(b, name, 0.2)
         assert day.model == name
         want = sky.daylight(name, b.sun_direction, day_of_year=b.times.day_of_year)
