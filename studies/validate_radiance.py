@@ -62,6 +62,7 @@ SETS = {
     "validation_holdout9": "validation_holdout9",
     "validation_holdout10": "validation_holdout10",
     "validation_holdout11": "validation_holdout11",
+    "validation_holdout12": "validation_holdout12",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -123,6 +124,7 @@ DEFAULT_METHODS = {
     "validation_holdout9": ("baseline", "families", "materials"),
     "validation_holdout10": ("baseline", "materials", "clipped"),
     "validation_holdout11": ("baseline", "materials", "perez"),
+    "validation_holdout12": ("baseline", "perez"),
 }
 
 
