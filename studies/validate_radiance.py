@@ -28,7 +28,8 @@ Each bundle's scores are cached in ``studies/out/<set>/scores``
 
 Usage: python studies/validate_radiance.py [--jobs 2] [--max-sweeps 2000]
 [--redo per-frame ...] (score those methods afresh, keeping the others' cached scores)
-[--set validation_set|validation_holdout|...] [--summary-only] (rebuild the
+[--set validation_set|validation_holdout|...] [--merge METHOD FOLDER] (copy a
+method scored on another commit's worktree into this set's scores) [--summary-only] (rebuild the
 tables and figures from the committed scores, fitting nothing) [--summary-cached]
 (the same from the scores cached so far, for a run stopped part way)
 """
@@ -75,7 +76,13 @@ QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
+    "lobe-floor",
 )  # fmt: skip
+#: Methods scored on another commit (a worktree of it, as ``perez``) and
+#: copied into this set's scores under their own name (:func:`merge_scores`):
+#: ``lobe-floor``, holdout 12's candidate, branch ``lobe-floor`` (the prior of
+#: log n from log 6 up; studies/README.md, "holdout 12's rule").
+SCORED_ELSEWHERE = {"lobe-floor": "perez"}
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
 #: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
@@ -124,7 +131,7 @@ DEFAULT_METHODS = {
     "validation_holdout9": ("baseline", "families", "materials"),
     "validation_holdout10": ("baseline", "materials", "clipped"),
     "validation_holdout11": ("baseline", "materials", "perez"),
-    "validation_holdout12": ("baseline", "perez"),
+    "validation_holdout12": ("baseline", "perez"),  # and lobe-floor, merged
 }
 
 
@@ -392,6 +399,22 @@ def _cached(
         out = score_bundle(str(path), max_sweeps, todo, out)
         file.write_text(json.dumps(out, indent=1))
     return out
+
+
+def merge_scores(scores: Path, other: Path, method: str) -> int:
+    """Copy each bundle's ``SCORED_ELSEWHERE[method]`` score from the cache
+    ``other`` (a worktree's) into the cache ``scores`` as ``method``; the
+    number of bundles copied."""
+    copied = 0
+    for file in sorted(other.glob("*.json")):
+        mine = scores / file.name
+        if not mine.exists():
+            continue
+        out = json.loads(mine.read_text())
+        out[method] = json.loads(file.read_text())[SCORED_ELSEWHERE[method]]
+        mine.write_text(json.dumps(out, indent=1))
+        copied += 1
+    return copied
 
 
 def _holds(entry: dict, truth: float) -> bool:
@@ -667,6 +690,12 @@ def main(argv=None) -> None:
     )
     ap.add_argument("--methods", nargs="*", default=None, choices=METHODS, help="methods to score")
     ap.add_argument(
+        "--merge",
+        nargs=2,
+        metavar=("METHOD", "FOLDER"),
+        help="copy a method of SCORED_ELSEWHERE from another worktree's score cache, and stop",
+    )
+    ap.add_argument(
         "--summary-only",
         action="store_true",
         help="fit nothing: rebuild the tables and figures from the set's committed scores "
@@ -680,6 +709,15 @@ def main(argv=None) -> None:
     )
     args = ap.parse_args(argv)
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
+    if args.merge:  # another worktree's scores of the same set, under their own name
+        method, folder = args.merge
+        n = merge_scores(HERE / "out" / args.set / "scores", Path(folder), method)
+        print(f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'")
+        return
+    fitting = not (args.summary_only or args.summary_cached)
+    elsewhere = set(methods) & set(SCORED_ELSEWHERE) if fitting else set()
+    if elsewhere:
+        raise SystemExit(f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge")
     bundles = HERE / "out" / args.set / "bundles"
     results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
