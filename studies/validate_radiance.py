@@ -711,6 +711,13 @@ def main(argv=None) -> None:
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
     if args.merge:  # another worktree's scores of the same set, under their own name
         method, folder = args.merge
+        if method not in SCORED_ELSEWHERE:
+            raise SystemExit(
+                f"validate_radiance: --merge: {method!r} is not scored elsewhere; "
+                f"one of {sorted(SCORED_ELSEWHERE)}"
+            )
+        if not Path(folder).is_dir():
+            raise SystemExit(f"validate_radiance: --merge: {folder}: no such score folder")
         n = merge_scores(HERE / "out" / args.set / "scores", Path(folder), method)
         print(f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'")
         return

@@ -7,10 +7,10 @@ import sys
 _IMPORT = "from bayesgloss._thirdparty import arviz; az = arviz(); print(az.__version__)"
 
 
-def _import_with_cache(cache):
+def _run_with_cache(code, cache):
     env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
     env.pop("PYTHONWARNINGS", None)
-    return subprocess.run([sys.executable, "-c", _IMPORT], capture_output=True, text=True, env=env)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
 
 
 def test_arviz_imports_when_its_daily_stamp_cannot_be_written(tmp_path):
@@ -20,13 +20,8 @@ def test_arviz_imports_when_its_daily_stamp_cannot_be_written(tmp_path):
     # print no notice, and leave the user's environment as it was
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("")
-    plain = _import_with_cache(blocker)
-    direct = subprocess.run(
-        [sys.executable, "-c", "import arviz"],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "XDG_CACHE_HOME": str(blocker)},
-    )
+    plain = _run_with_cache(_IMPORT, blocker)
+    direct = _run_with_cache("import arviz", blocker)
     assert direct.returncode != 0  # the failure is real without the retry
     assert plain.returncode == 0, plain.stderr
     assert plain.stdout.strip().startswith("0.")
@@ -37,7 +32,7 @@ def test_arviz_imports_when_its_daily_stamp_cannot_be_written(tmp_path):
 
 
 def test_arviz_import_prints_no_refactor_notice_on_a_fresh_cache(tmp_path):
-    proc = _import_with_cache(tmp_path / "cache")
+    proc = _run_with_cache(_IMPORT, tmp_path / "cache")
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
     assert (tmp_path / "cache" / "arviz" / "daily_warning").exists()
