@@ -77,15 +77,17 @@ QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
-    "lobe-floor", "cie-families",
+    "lobe-floor", "cie-families", "equal-near",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
 #: ``lobe-floor``, holdout 12's candidate, branch ``lobe-floor`` (the prior of
 #: log n from log 6 up; studies/README.md, "holdout 12's rule"), and
 #: ``cie-families``, holdout 13's, branch ``cie-families`` (CIE general skies
-#: 13 and 15 in the sky families' stack; "holdout 13's rule").
-SCORED_ELSEWHERE = {"lobe-floor": "perez", "cie-families": "perez"}
+#: 13 and 15 in the sky families' stack; "holdout 13's rule"), and
+#: ``equal-near``, its second, branch ``equal-near`` (equal weights only among
+#: the families not beyond doubt behind the best where PSIS-LOO is unreliable).
+SCORED_ELSEWHERE = {"lobe-floor": "perez", "cie-families": "perez", "equal-near": "perez"}
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
 #: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
@@ -135,7 +137,7 @@ DEFAULT_METHODS = {
     "validation_holdout10": ("baseline", "materials", "clipped"),
     "validation_holdout11": ("baseline", "materials", "perez"),
     "validation_holdout12": ("baseline", "perez"),  # and lobe-floor, merged
-    "validation_holdout13": ("baseline", "perez"),  # and cie-families, merged
+    "validation_holdout13": ("baseline", "perez"),  # and cie-families, equal-near, merged
 }
 
 
