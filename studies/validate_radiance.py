@@ -114,7 +114,8 @@ ESTIMATES = {
     # bounds (bayesgloss.sampling.censored)
     "clipped": {**FOUR_SKY_FAMILIES, "lobe": "materials", "clipped": "likelihood"},
     # the default since stop 43: the lobe stack, the clear-sky Perez shapes in the sky's stack
-    # (bayesgloss.sky_families.PEREZ_FAMILIES)
+    # (bayesgloss.sky_families.PEREZ_FAMILIES); since stop 45 with no weight for the sky
+    # families beyond doubt behind where PSIS-LOO is unreliable (holdout 13's "equal-near")
     "perez": {
         "per_frame": True,
         "illumination": "families",

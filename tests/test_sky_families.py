@@ -375,8 +375,8 @@ def test_high_k_share_weighs_each_fit_by_its_stacking_weight():
     # one with none: 0.27 of what the weights rest on (an unweighted mean
     # would say 0.15, the winner's alone 0.30)
     scores = {
-        "a": {"weight": 0.9, "high_k": 30, "entries": 100},
-        "b": {"weight": 0.1, "high_k": 0, "entries": 100},
+        "a": {"weight": 0.9, "high_k": 30, "entries": 100, "elpd_diff": 0.0, "dse": 0.0},
+        "b": {"weight": 0.1, "high_k": 0, "entries": 100, "elpd_diff": 3.0, "dse": 2.0},
     }
     assert sky_families.high_k_share(scores) == pytest.approx(0.27)
     equal = sky_families.equal_when_unreliable(scores)
@@ -385,6 +385,22 @@ def test_high_k_share_weighs_each_fit_by_its_stacking_weight():
     # 5 of 100 on the winner: below one in ten, the weights are kept
     scores["a"]["high_k"] = 5
     assert sky_families.equal_when_unreliable(scores) is scores
+
+
+def test_equal_weights_leave_out_the_fits_beyond_doubt_behind():
+    # holdout 13's candidate: 60 nats and 6 standard errors behind the best
+    # is beyond the screen's margin (50 nats and 5 se): weight 0; 60 nats at
+    # 20 se (100 nats needed) and 40 nats at 1 se (50 needed) stay in
+    row = {"high_k": 30, "entries": 100}
+    scores = {
+        "a": {**row, "weight": 0.7, "elpd_diff": 0.0, "dse": 0.0},
+        "b": {**row, "weight": 0.0, "elpd_diff": 60.0, "dse": 10.0},
+        "c": {**row, "weight": 0.2, "elpd_diff": 60.0, "dse": 20.0},
+        "d": {**row, "weight": 0.1, "elpd_diff": 40.0, "dse": 1.0},
+    }
+    equal = sky_families.equal_when_unreliable(scores)
+    assert [equal[n]["weight"] for n in "abcd"] == pytest.approx([1 / 3, 0.0, 1 / 3, 1 / 3])
+    assert [equal[n]["stacking_weight"] for n in "abcd"] == [0.7, 0.0, 0.2, 0.1]
 
 
 def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
