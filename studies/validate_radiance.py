@@ -65,6 +65,7 @@ SETS = {
     "validation_holdout11": "validation_holdout11",
     "validation_holdout12": "validation_holdout12",
     "validation_holdout13": "validation_holdout13",
+    "validation_holdout14": "validation_holdout14",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -139,6 +140,7 @@ DEFAULT_METHODS = {
     "validation_holdout11": ("baseline", "materials", "perez"),
     "validation_holdout12": ("baseline", "perez"),  # and lobe-floor, merged
     "validation_holdout13": ("baseline", "perez"),  # and cie-families, equal-near, merged
+    "validation_holdout14": ("baseline", "perez"),
 }
 
 
