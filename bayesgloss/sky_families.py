@@ -507,7 +507,9 @@ def _fit_screened(names, args, seed, options, progress, jobs, unreliable_loo):
     draw), scored, and the rest not far behind run on from where they
     stopped (the same chain, sweep for sweep). Nothing is kept early where the stacking
     weights would be made equal (``unreliable_loo="equal"`` and
-    :func:`loo_unreliable`): each fit would then weigh as much as any.
+    :func:`loo_unreliable`): the guard then weighs every fit by its full
+    run's elpd_loo (:func:`equal_when_unreliable`), so every fit runs in
+    full, even those it will give no weight (:func:`behind_beyond_doubt`).
     ``options["screen_families"] = False`` runs every family in full.
 
     Returns
