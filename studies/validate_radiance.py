@@ -70,6 +70,7 @@ SETS = {
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
     "mitsuba_holdout3": "validation_mitsuba_holdout3",
+    "mitsuba_holdout4": "validation_mitsuba_holdout4",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -130,6 +131,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout": ("families", "materials"),
     "mitsuba_holdout2": ("families", "materials"),
     "mitsuba_holdout3": ("families", "materials"),
+    "mitsuba_holdout4": ("baseline", "perez"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
