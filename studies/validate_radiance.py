@@ -79,7 +79,7 @@ QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
-    "lobe-floor", "cie-families", "equal-near",
+    "lobe-floor", "cie-families", "equal-near", "day-exposure",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -88,8 +88,15 @@ METHODS = (
 #: ``cie-families``, holdout 13's, branch ``cie-families`` (CIE general skies
 #: 13 and 15 in the sky families' stack; "holdout 13's rule"), and
 #: ``equal-near``, its second, branch ``equal-near`` (equal weights only among
-#: the families not beyond doubt behind the best where PSIS-LOO is unreliable).
-SCORED_ELSEWHERE = {"lobe-floor": "perez", "cie-families": "perez", "equal-near": "perez"}
+#: the families not beyond doubt behind the best where PSIS-LOO is unreliable),
+#: and ``day-exposure``, Mitsuba holdout 4's, branch ``day-exposure`` (each
+#: frame's unknown exposure drawn about the day's; "Mitsuba holdout 4").
+SCORED_ELSEWHERE = {
+    "lobe-floor": "perez",
+    "cie-families": "perez",
+    "equal-near": "perez",
+    "day-exposure": "perez",
+}
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
 #: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
@@ -730,12 +737,16 @@ def main(argv=None) -> None:
         if not Path(folder).is_dir():
             raise SystemExit(f"validate_radiance: --merge: {folder}: no such score folder")
         n = merge_scores(HERE / "out" / args.set / "scores", Path(folder), method)
-        print(f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'")
+        print(
+            f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'"
+        )
         return
     fitting = not (args.summary_only or args.summary_cached)
     elsewhere = set(methods) & set(SCORED_ELSEWHERE) if fitting else set()
     if elsewhere:
-        raise SystemExit(f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge")
+        raise SystemExit(
+            f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge"
+        )
     bundles = HERE / "out" / args.set / "bundles"
     results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
