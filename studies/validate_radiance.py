@@ -730,12 +730,16 @@ def main(argv=None) -> None:
         if not Path(folder).is_dir():
             raise SystemExit(f"validate_radiance: --merge: {folder}: no such score folder")
         n = merge_scores(HERE / "out" / args.set / "scores", Path(folder), method)
-        print(f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'")
+        print(
+            f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'"
+        )
         return
     fitting = not (args.summary_only or args.summary_cached)
     elsewhere = set(methods) & set(SCORED_ELSEWHERE) if fitting else set()
     if elsewhere:
-        raise SystemExit(f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge")
+        raise SystemExit(
+            f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge"
+        )
     bundles = HERE / "out" / args.set / "bundles"
     results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
