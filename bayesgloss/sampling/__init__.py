@@ -26,7 +26,9 @@ runs one problem at a time and its per-step overhead dominates for a
 - :mod:`~bayesgloss.sampling.material`: :func:`sample_material`, the same
   scheme for the one-material model (shared gamma and n, hierarchical
   albedo: the object's answer), with :mod:`~bayesgloss.sampling.populations`
-  (exact draws of its populations' means and spreads);
+  (exact draws of its populations' means and spreads) and
+  :mod:`~bayesgloss.sampling.exposure_moves` (the day-level exposure's level
+  and spread moved with the likelihood unchanged);
 - :mod:`~bayesgloss.sampling.facet_answers`: :func:`facets_given_frames`,
   each facet's own posterior given the object's illumination;
 - :mod:`~bayesgloss.sampling.ridge`: :func:`lattice_shift`, an exact move

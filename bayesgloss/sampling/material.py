@@ -76,7 +76,7 @@ import numpy as np
 
 from .. import fresnel as fr
 from .. import illumination as il
-from . import censored, populations, ridge, schedule
+from . import censored, exposure_moves, populations, ridge, schedule
 from .joint import _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .schedule import JointSamples, run_chain
@@ -346,8 +346,9 @@ class _MaterialChain(_JointChain):
         self._sun_jump(self.th, parts, log_sigma)
         if not data.exposure_known:
             self._exposure_ridge()
-            if self.hyper.shape[-1] > 4:
-                self._exposure_spread_move()
+            if self.hyper.shape[-1] > 4:  # the day's exposure level and spread
+                exposure_moves.level_ridge(self)
+                exposure_moves.spread_move(self)
         self._scale_ridge()
         self.collective_moves()
         self.sweeps += 1
@@ -486,36 +487,6 @@ class _MaterialChain(_JointChain):
         lp = self._frame_prior(lam, hyper=self.hyper)  # (K, E, W, T)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W, T)
         self.lam = self.lam + moved[..., None] * direction
-
-    def _exposure_spread_move(self, tries: int = 2, step: float = 0.3) -> None:
-        """The day's exposure spread and every frame's departure from the
-        day's mean scaled together, d_t = log e_t - mu_e to d_t e^delta and
-        log sd_e to log sd_e + delta, each frame's sun and sky down by the
-        change of its exposure (the likelihood unchanged), delta ~ N(0,
-        ``step``^2); accepted by the priors' ratio and the Jacobian e^(T
-        delta). Drawn one at a time, a spread and the departures it governs
-        move slowly together (the hierarchy's funnel): with them alone the
-        runs of Mitsuba holdout 4 went 1.27 times as long."""
-        rng, t = self.rng, self.t
-        cur = self._frame_prior(self.lam).sum(-1)
-        for _ in range(tries):
-            delta = step * rng.standard_normal(cur.shape)  # (E, W)
-            hyper = self.hyper.copy()
-            hyper[..., 5] += delta
-            d = self.lam[..., 0] - self.hyper[..., 4][..., None]
-            change = d * np.expm1(delta)[..., None]
-            lam = self.lam.copy()
-            lam[..., 0] += change
-            lam[..., 1] -= change
-            lam[..., 2] -= change
-            new = self._frame_prior(lam, hyper=hyper).sum(-1)
-            lo, hi = il.EXPOSURE_LOG_SPREAD
-            inside = (hyper[..., 5] >= lo) & (hyper[..., 5] <= hi)
-            ok = inside & (np.log(rng.random(new.shape)) < new - cur + t * delta)
-            self.hyper = np.where(ok[..., None], hyper, self.hyper)
-            self.lam = np.where(ok[..., None, None], lam, self.lam)
-            cur = np.where(ok, new, cur)
-            self.accepted["spread"] = self.accepted.get("spread", 0.0) + ok.mean() / tries
 
     # -- collective moves: the whole state as a vector ---------------------------
 
