@@ -66,11 +66,13 @@ SETS = {
     "validation_holdout12": "validation_holdout12",
     "validation_holdout13": "validation_holdout13",
     "validation_holdout14": "validation_holdout14",
+    "validation_holdout15": "validation_holdout15",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
     "mitsuba_holdout3": "validation_mitsuba_holdout3",
     "mitsuba_holdout4": "validation_mitsuba_holdout4",
+    "mitsuba_holdout5": "validation_mitsuba_holdout5",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -79,7 +81,7 @@ QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
-    "lobe-floor", "cie-families", "equal-near",
+    "lobe-floor", "cie-families", "equal-near", "day-exposure",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -88,8 +90,15 @@ METHODS = (
 #: ``cie-families``, holdout 13's, branch ``cie-families`` (CIE general skies
 #: 13 and 15 in the sky families' stack; "holdout 13's rule"), and
 #: ``equal-near``, its second, branch ``equal-near`` (equal weights only among
-#: the families not beyond doubt behind the best where PSIS-LOO is unreliable).
-SCORED_ELSEWHERE = {"lobe-floor": "perez", "cie-families": "perez", "equal-near": "perez"}
+#: the families not beyond doubt behind the best where PSIS-LOO is unreliable),
+#: and ``day-exposure``, Mitsuba holdout 4's, branch ``day-exposure`` (each
+#: frame's unknown exposure drawn about the day's; "Mitsuba holdout 4").
+SCORED_ELSEWHERE = {
+    "lobe-floor": "perez",
+    "cie-families": "perez",
+    "equal-near": "perez",
+    "day-exposure": "perez",
+}
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
 #: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
@@ -132,6 +141,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout2": ("families", "materials"),
     "mitsuba_holdout3": ("families", "materials"),
     "mitsuba_holdout4": ("baseline", "perez"),
+    "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -143,6 +153,7 @@ DEFAULT_METHODS = {
     "validation_holdout12": ("baseline", "perez"),  # and lobe-floor, merged
     "validation_holdout13": ("baseline", "perez"),  # and cie-families, equal-near, merged
     "validation_holdout14": ("baseline", "perez"),
+    "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
 }
 
 
