@@ -370,6 +370,16 @@ class JointData:
         return self.sources + 1
 
     @property
+    def exposure_direction(self) -> np.ndarray:
+        """(L,): exposure up, sun and sky down, the direction of the frame
+        latents along which the curves are unchanged (they depend on e_t a_t
+        and e_t b_t only), as the exposure moves of :mod:`bayesgloss.sampling`
+        take it."""
+        out = np.zeros(self.n_latents)
+        out[:3] = 1.0, -1.0, -1.0
+        return out
+
+    @property
     def free(self) -> np.ndarray:
         """Which of the frame latents (:func:`latent_names`) are unknowns, (L,) of bool."""
         ratios = [self.shapes >= 2] * (self.sources - 2)

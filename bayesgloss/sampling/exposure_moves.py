@@ -27,18 +27,24 @@ import numpy as np
 from .. import illumination as il
 from . import ridge
 
-__all__ = ["level_ridge", "spread_move", "LEVEL_REACH"]
+__all__ = ["level_ridge", "spread_move", "mean_shifted", "log_prior_mean", "LEVEL_REACH"]
 
 #: The reach of the level ridge's lattice, in steps
 #: (:func:`~bayesgloss.sampling.ridge.lattice_shift`).
 LEVEL_REACH = 4
 
 
-def _direction(chain) -> np.ndarray:
-    """Exposure up, sun and sky down: the frames' latents' direction of a level move."""
-    out = np.zeros(chain.data.n_latents)
-    out[:3] = 1.0, -1.0, -1.0
-    return out
+def mean_shifted(hyper, c) -> np.ndarray:
+    """The hyper (..., 6) with the day's mean log exposure mu_e up by c,
+    broadcast (c's shape, then hyper's)."""
+    c = np.asarray(c, dtype=float)
+    return hyper + c[..., None] * np.eye(hyper.shape[-1])[4]
+
+
+def log_prior_mean(hyper, data) -> np.ndarray:
+    """Log prior of the day's mean log exposure, N(0, exposure_sd^2) up to a
+    constant, of a hyper (..., 6): (...)."""
+    return -0.5 * (hyper[..., 4] / data.frame_priors.exposure_sd) ** 2
 
 
 def level_ridge(chain) -> None:
@@ -46,15 +52,15 @@ def level_ridge(chain) -> None:
     log sun and log sky down by c, c drawn on a lattice of spacing u x the
     conditional's Gaussian width (u uniform on [0.2, 0.6], fresh each
     sweep): the priors of the frames' suns and skies and of mu_e make it."""
-    q = chain.data.frame_priors
+    q, direction = chain.data.frame_priors, chain.data.exposure_direction
     width = 1.0 / np.sqrt(chain.t * (1 / q.sun_clear_sd**2 + 1 / q.sky_sd**2))
     h = width * chain.rng.uniform(0.2, 0.6)
     c = ridge.lattice_offsets(LEVEL_REACH)[:, None, None] * h  # (K, E, W)
-    lam = chain.lam[None] + c[..., None, None] * _direction(chain)
-    hyper = chain.hyper[None] + c[..., None] * np.eye(chain.hyper.shape[-1])[4]
-    lp = chain._frame_prior(lam, hyper=hyper).sum(-1) - 0.5 * (hyper[..., 4] / q.exposure_sd) ** 2
+    lam = chain.lam[None] + c[..., None, None] * direction
+    hyper = mean_shifted(chain.hyper[None], c)
+    lp = chain._frame_prior(lam, hyper=hyper).sum(-1) + log_prior_mean(hyper, chain.data)
     moved = ridge.lattice_shift(lp, LEVEL_REACH, chain.rng) * h  # (E, W)
-    chain.lam = chain.lam + moved[..., None, None] * _direction(chain)
+    chain.lam = chain.lam + moved[..., None, None] * direction
     chain.hyper[..., 4] += moved
 
 
@@ -71,7 +77,8 @@ def spread_move(chain, tries: int = 2, step: float = 0.3) -> None:
         hyper = chain.hyper.copy()
         hyper[..., 5] += delta
         d = chain.lam[..., 0] - chain.hyper[..., 4][..., None]
-        lam = chain.lam + (d * np.expm1(delta)[..., None])[..., None] * _direction(chain)
+        step_e = d * np.expm1(delta)[..., None]  # each frame's change of log exposure
+        lam = chain.lam + step_e[..., None] * chain.data.exposure_direction
         new = chain._frame_prior(lam, hyper=hyper).sum(-1)
         inside = (hyper[..., 5] >= lo) & (hyper[..., 5] <= hi)
         ok = inside & (np.log(rng.random(new.shape)) < new - cur + chain.t * delta)

@@ -315,9 +315,7 @@ class _JointChain:
 
     def _exposure_ridge(self) -> None:
         c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
-        direction = np.zeros(self.data.n_latents)
-        direction[:3] = 1.0, -1.0, -1.0
-        prop = self.lam + c[..., None] * direction
+        prop = self.lam + c[..., None] * self.data.exposure_direction
         ratio = self._frame_prior(prop) - self._frame_prior(self.lam)
         ok = np.log(self.rng.random(ratio.shape)) < ratio
         self.lam = np.where(ok[..., None], prop, self.lam)

@@ -435,11 +435,10 @@ class _MaterialChain(_JointChain):
         lam = self.lam[None] + c[..., None, None] * shift
         # where the frames' exposures are drawn about the day's, its mean moves with them
         day = self.hyper.shape[-1] > 4
-        hyper = self.hyper[None] + c[..., None] * np.eye(self.hyper.shape[-1])[4] if day else None
-        hyper = self.hyper if hyper is None else hyper
+        hyper = exposure_moves.mean_shifted(self.hyper, c) if day else self.hyper
         lp = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam, hyper=hyper).sum(-1)
         if day:
-            lp = lp - 0.5 * (hyper[..., 4] / self.data.frame_priors.exposure_sd) ** 2
+            lp = lp + exposure_moves.log_prior_mean(hyper, self.data)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W)
         self.th[..., 2] -= moved[:, None, :]
         self.hyper[..., 0] -= moved
@@ -479,8 +478,7 @@ class _MaterialChain(_JointChain):
         :meth:`_scale_ridge`, on a lattice of spacing u x 0.5, u uniform on
         [0.2, 0.6]: the frame's conditional along it is its prior's, as
         bimodal as the scale ridge's where the sun is hazy."""
-        direction = np.zeros(self.data.n_latents)
-        direction[:3] = 1.0, -1.0, -1.0
+        direction = self.data.exposure_direction
         h = 0.5 * self.rng.uniform(0.2, 0.6)
         c = ridge.lattice_offsets(RIDGE_REACH) * h
         lam = self.lam[None] + c[:, None, None, None, None] * direction
