@@ -14,10 +14,11 @@ one-material model's (:func:`bayesgloss.sampling.sample_material`): one
 gamma and n for every facet, each facet's albedo from a log-normal
 population of spread tau, every frame's sun, sky and sky shape (and
 exposure) inferred with them; the posterior groups hold ``gamma_object``,
-``n_object``, ``albedo_spread`` (tau) and ``sun_state_weight`` (the day's
-clear, dimmed and hidden sun). Each facet's own posterior (``gamma``...)
-is its sampler's given the object's illumination, averaged over it
-(:func:`bayesgloss.sampling.facets_given_frames`). Where no sky is named,
+``n_object``, ``albedo_spread`` (tau), ``sun_state_weight`` (the day's
+clear, dimmed and hidden sun) and ``exposure_spread`` (the frames' log
+exposures' sd about the day's, where unknown). Each facet's own posterior
+(``gamma``...) is its sampler's given the object's illumination, averaged
+over it (:func:`bayesgloss.sampling.facets_given_frames`). Where no sky is named,
 that model is fitted under each sky family of :mod:`bayesgloss.sky_families`
 and the fits stacked by PSIS-LOO; the glossy lobe likewise under the
 most-weighted family (``lobe="materials"``, :mod:`bayesgloss.lobe_families`).
@@ -555,10 +556,10 @@ def _summarise(
         summary["sky_models"] = sky_model_summary(idata)
         post = idata.posterior
         summary["object"]["n"] = _quantiles(post["n_object"].values)
-        summary["object"]["albedo_spread"] = _quantiles(post["albedo_spread"].values)
-        if "fresnel_strength" in post:  # the Fresnel raise's unknowns
-            summary["object"]["fresnel_strength"] = _quantiles(post["fresnel_strength"].values)
-            summary["object"]["normal_albedo"] = _quantiles(post["normal_albedo"].values)
+        # the day-level spreads, the Fresnel raise's unknowns, the family's roughness
+        for name in ("albedo_spread", "exposure_spread", "fresnel_strength", "normal_albedo"):
+            if name in post:
+                summary["object"][name] = _quantiles(post[name].values)
         summary["fresnel"] = post.attrs.get("fresnel", "none")
         summary["lobe_family"] = post.attrs.get(
             "lobe_family_most_weight", post.attrs.get("lobe_family", "phong")
@@ -570,12 +571,10 @@ def _summarise(
                     post.attrs.get("occluder_albedo", OCCLUDER_REFLECTANCE),
                 )
             )
-        if "roughness_object" in post:  # the lobe family's microfacet roughness
+        if "roughness_object" in post:
             summary["object"]["roughness"] = _quantiles(post["roughness_object"].values)
-        states = post["sun_state_weight"].values.mean(axis=(0, 1))
-        summary["sun_state"] = {
-            str(k): float(v) for k, v in zip(post["sun_state"].values, states, strict=True)
-        }
+        states = post["sun_state_weight"].values.mean(axis=(0, 1)).tolist()
+        summary["sun_state"] = dict(zip(post["sun_state"].values.tolist(), states, strict=True))
     return EstimateResult(idata, summary, samples)
 
 

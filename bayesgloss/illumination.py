@@ -50,6 +50,12 @@ turbidity), and a sun dimmed or hidden by cloud (weight 0.2, N(-2.5,
 twice as bright at 1 sd: haze, broken cloud); w_t uniform on the simplex
 (Dirichlet(1, ..., 1): in the u coordinates, log density sum_k log w_tk);
 log e_t ~ N(0, 2^2) where the exposure is unknown. The one-material model
+draws the unknown exposures about the day's instead (stop 46,
+``IlluminationPriors.day_exposure``): log e_t ~ N(mu_e, sd_e^2), mu_e ~
+N(0, 2^2), log sd_e uniform from log 0.01 to log 3, since the bundle
+spec's camera keeps its exposure unless it is known to vary it; a camera
+that kept it gives sd_e near 0.01 and frames tied to one exposure, an
+automatic one a wider sd_e. The one-material model
 (:func:`log_prior_material`) gives the sun a third, hidden component
 (N(-9, 2^2): below the noise of any curve) and lets the day choose the
 three components' weights (uniform on the simplex), so that a day whose
@@ -90,6 +96,10 @@ __all__ = [
     "log_prior_material",
     "log_sun_weights",
     "material_m_center",
+    "EXPOSURE_LOG_SPREAD",
+    "HYPER",
+    "hyper_size",
+    "exposure_day",
     "MATERIAL_M_SD",
     "MATERIAL_LOG_TAU",
     "unit_parts",
@@ -118,7 +128,15 @@ FLOOR_FRACTION = 0.01
 
 @dataclass(frozen=True)
 class IlluminationPriors:
-    """Priors of the per-frame latents (module docstring). Natural logs."""
+    """Priors of the per-frame latents (module docstring). Natural logs.
+
+    ``day_exposure``: where the exposure is unknown, the one-material model
+    draws each frame's log e_t from the day's N(mu_e, sd_e^2), mu_e ~ N(0,
+    ``exposure_sd``^2) and log sd_e uniform on :data:`EXPOSURE_LOG_SPREAD`
+    (:func:`log_prior_material`), instead of N(0, ``exposure_sd``^2) for
+    each frame alone: the bundle spec's camera keeps its exposure unless it
+    is known to vary it, and the object then tells how much it varied.
+    """
 
     sun_clear_sd: float = 0.35
     sun_cloud_weight: float = 0.2
@@ -128,6 +146,7 @@ class IlluminationPriors:
     sun_hidden_sd: float = 2.0
     sky_sd: float = 0.7
     exposure_sd: float = 2.0
+    day_exposure: bool = True
 
 
 def split_sky(day):
@@ -351,6 +370,16 @@ class JointData:
         return self.sources + 1
 
     @property
+    def exposure_direction(self) -> np.ndarray:
+        """(L,): exposure up, sun and sky down, the direction of the frame
+        latents along which the curves are unchanged (they depend on e_t a_t
+        and e_t b_t only), as the exposure moves of :mod:`bayesgloss.sampling`
+        take it."""
+        out = np.zeros(self.n_latents)
+        out[:3] = 1.0, -1.0, -1.0
+        return out
+
+    @property
     def free(self) -> np.ndarray:
         """Which of the frame latents (:func:`latent_names`) are unknowns, (L,) of bool."""
         ratios = [self.shapes >= 2] * (self.sources - 2)
@@ -516,6 +545,29 @@ MATERIAL_M_SD = 3.0
 MATERIAL_LOG_TAU = (float(np.log(0.01)), float(np.log(3.0)))
 
 
+#: Range of log sd_e, the spread of the frames' log exposures about the
+#: day's mean under its log-uniform prior (``IlluminationPriors.day_exposure``):
+#: from 1 % (a camera that kept its exposure) to a factor of 20 (an
+#: automatic exposure through a day whose light changed that much).
+EXPOSURE_LOG_SPREAD = (float(np.log(0.01)), float(np.log(3.0)))
+#: The one-material model's day-level coordinates (its ``hyper``), in order;
+#: the last two only where the exposure is day-level (:func:`hyper_size`).
+HYPER = ("m", "log_tau", "sun_weight_ratio_1", "sun_weight_ratio_2", "exposure_mean",
+         "log_exposure_spread")  # fmt: skip
+
+
+def hyper_size(data: JointData) -> int:
+    """Day-level coordinates of the one-material model (:data:`HYPER`): 6
+    where each frame's unknown exposure is drawn about the day's
+    (``IlluminationPriors.day_exposure``), else 4."""
+    return 6 if data.frame_priors.day_exposure and not data.exposure_known else 4
+
+
+def exposure_day(hyper):
+    """(mu_e, log sd_e), (..., 2), of a hyper (..., 6); None for (..., 4)."""
+    return hyper[..., 4:6] if hyper.shape[-1] > 4 else None
+
+
 def material_m_center(data: JointData) -> float:
     """The prior centre of m: the median over facets of the data's log scale."""
     return float(np.median(data.log_s_center))
@@ -526,12 +578,14 @@ def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
     theta (E, F, W, >= 3) (gamma and log n the same for every facet; with
     Fresnel terms, k and log A of :func:`bayesgloss.fresnel.log_prior_fresnel`
     in its columns 4 and 5) and
-    hyper (E, W, 4) = (m, log tau, v_1, v_2): uniform gamma and log n, log
+    hyper (E, W, 4) = (m, log tau, v_1, v_2) or (E, W, 6) with (mu_e, log
+    sd_e) (:data:`HYPER`, :func:`hyper_size`): uniform gamma and log n, log
     s_f ~ N(m, tau^2), m ~ N(:func:`material_m_center`, :data:`MATERIAL_M_SD`^2),
     log tau uniform on :data:`MATERIAL_LOG_TAU`, the day's sun weights
     (:func:`log_sun_weights`) uniform on the simplex (Dirichlet(1, 1, 1) in
-    the log-ratio coordinates v); -inf outside the support. The frames'
-    priors given the sun weights are :func:`log_prior_frames`'."""
+    the log-ratio coordinates v), mu_e ~ N(0, ``exposure_sd``^2) and log
+    sd_e uniform on :data:`EXPOSURE_LOG_SPREAD`; -inf outside the support.
+    The frames' priors given these are :func:`log_prior_frames`'."""
     p = data.priors
     gamma, log_n, log_s = theta[:, 0, :, 0], theta[:, 0, :, 1], theta[..., 2]
     m, log_tau = hyper[..., 0], hyper[..., 1]
@@ -544,6 +598,11 @@ def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
     lp = lp - 0.5 * ((m - material_m_center(data)) / MATERIAL_M_SD) ** 2
     if hyper.shape[-1] > 2:  # the day's sun weights, uniform on the simplex
         lp = lp + np.sum(log_sun_weights(hyper), axis=-1)
+    if hyper.shape[-1] > 4:  # the day's exposure: mu_e normal, log sd_e uniform
+        lp = lp - 0.5 * (hyper[..., 4] / data.frame_priors.exposure_sd) ** 2
+        inside &= (hyper[..., 5] >= EXPOSURE_LOG_SPREAD[0]) & (
+            hyper[..., 5] <= EXPOSURE_LOG_SPREAD[1]
+        )
     k_col, a_col = fr.FRESNEL_COLUMNS
     if data.fresnel is not None and theta.shape[-1] > a_col:  # k and log A, shared
         lp = lp + fr.log_prior_fresnel(theta[:, 0, :, k_col], theta[:, 0, :, a_col])
@@ -609,7 +668,9 @@ def log_sun_weights(hyper) -> np.ndarray:
     return _log_softmax_after_zero(hyper[..., 2:4])
 
 
-def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=False) -> np.ndarray:
+def log_prior_frames(
+    lam, data: JointData, log_sun_weights=None, point_mass=False, exposure=None
+) -> np.ndarray:
     """Log prior of each frame's latents, (..., T) for lam (..., T, L) (module docstring).
 
     ``log_sun_weights`` (..., 3): the log weights of the sun's clear, dimmed
@@ -617,6 +678,9 @@ def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=Fals
     sun state, :mod:`bayesgloss.sampling.material`); None: the fixed
     two-part mixture (clear 0.8, dimmed 0.2). ``point_mass``: the hidden
     component is a = 0, log a = -inf (its log prior its weight's).
+    ``exposure`` (..., 2): the day's (mu_e, log sd_e) (:func:`exposure_day`),
+    log e_t ~ N(mu_e, sd_e^2) where the exposure is unknown; None: N(0,
+    ``exposure_sd``^2) (its constant left out).
     """
     q = data.frame_priors
     log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
@@ -645,7 +709,10 @@ def log_prior_frames(lam, data: JointData, log_sun_weights=None, point_mass=Fals
         lp = lp + total
     if data.exposure_known:
         return lp
-    return lp - 0.5 * (log_e / q.exposure_sd) ** 2
+    if exposure is None:
+        return lp - 0.5 * (log_e / q.exposure_sd) ** 2
+    mu, log_sd = exposure[..., 0][..., None], exposure[..., 1][..., None]
+    return lp - 0.5 * ((log_e - mu) * np.exp(-log_sd)) ** 2 - log_sd
 
 
 def log_shape_weights(lam) -> np.ndarray:
@@ -892,22 +959,29 @@ def sample_prior_material(
     theta (F, size, 4) (gamma, log n and log sigma shared, sigma log-uniform;
     (F, size, 6) with the shared Fresnel k and log A where the data carry
     Fresnel terms),
-    hyper (size, 4) and lam (size, T, L), each frame's sun from the day's
+    hyper (size, :func:`hyper_size`) and lam (size, T, L), each frame's sun from the day's
     three-part mixture (``point_mass``: a hidden sun log a = -inf, as
-    :func:`log_prior_frames`)."""
+    :func:`log_prior_frames`, and hyper (size, 4): the Hamiltonian sampler's
+    model has no day-level exposure)."""
     p, q = data.priors, data.frame_priors
     f, t = data.shape
     th, lam = sample_prior(data, size, rng)
     th[..., 0] = rng.uniform(0, 1, size)[None, :]
     th[..., 1] = rng.uniform(*p.log_n, size)[None, :]
-    hyper = np.empty((size, 4))
+    # the Hamiltonian sampler's model (point_mass) keeps each frame's exposure on its own
+    hyper = np.empty((size, 4 if point_mass else hyper_size(data)))
     hyper[:, 0] = material_m_center(data) + MATERIAL_M_SD * rng.standard_normal(size)
     hyper[:, 1] = rng.uniform(*MATERIAL_LOG_TAU, size)
     th[..., 2] = hyper[None, :, 0] + np.exp(hyper[None, :, 1]) * rng.standard_normal((f, size))
     th[..., 3] = rng.uniform(*p.log_sigma, size)[None, :]  # one sigma for all facets
     weights = rng.dirichlet(np.ones(3), size=size)  # clear, dimmed, hidden
-    hyper[:, 2:] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
+    hyper[:, 2:4] = np.log(weights[:, 1:]) - np.log(weights[:, :1])
     lam[..., 1] = draw_log_sun(weights, t, q, rng, point_mass)
+    if hyper.shape[1] > 4:  # each frame's exposure about the day's
+        hyper[:, 4] = q.exposure_sd * rng.standard_normal(size)
+        hyper[:, 5] = rng.uniform(*EXPOSURE_LOG_SPREAD, size)
+        z = rng.standard_normal((size, t))
+        lam[..., 0] = hyper[:, 4:5] + np.exp(hyper[:, 5:6]) * z
     if data.fresnel is not None:  # k and log A, shared by the facets
         fres = fr.sample_prior_fresnel(size, rng)
         th = np.concatenate([th, np.broadcast_to(fres[None], (f, size, 2))], axis=-1)

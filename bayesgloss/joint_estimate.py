@@ -239,7 +239,7 @@ def joint_fit(
     frames = samples.frames  # (E, S, T, L)
     ll = il.pointwise_log_likelihood(th, frames, data).transpose(0, 2, 1, 3)  # (E, S, F, T)
     pred = il.simulate(th, frames, data, rng).transpose(0, 2, 1, 3)
-    hyper = samples.material  # (E, S, 4)
+    hyper = samples.material  # (E, S, H): il.HYPER
     post = {
         "gamma_object": th[:, 0, :, 0],
         "n_object": np.exp(th[:, 0, :, 1]),
@@ -250,6 +250,8 @@ def joint_fit(
     }
     if data.log_exposure is None:
         post["exposure"] = np.exp(frames[..., 0])
+    if hyper.shape[-1] > 4:  # the sd of the frames' log exposures about the day's
+        post["exposure_spread"] = np.exp(hyper[..., 5])
     if family != "phong":  # the family's microfacet roughness (bayesgloss.lobes)
         post["roughness_object"] = roughness_of_exponent(post["n_object"])
     if data.fresnel is not None:  # the Fresnel raise's strength and normal-incidence albedo
@@ -272,7 +274,9 @@ def joint_fit(
         coords["sky_model"] = list(names)
     # each draw's log posterior density (up to a constant), sigma at its draw
     lp = np.nansum(ll, axis=(2, 3)) + il.log_prior_material(th, hyper, data)
-    lp += il.log_prior_frames(frames, data, il.log_sun_weights(hyper)).sum(-1)
+    lp += il.log_prior_frames(
+        frames, data, il.log_sun_weights(hyper), exposure=il.exposure_day(hyper)
+    ).sum(-1)
     samples.data = data
     samples.facets = None
     idata = az.from_dict(

@@ -134,6 +134,8 @@ def sbc_object(
     truth = (th[0, 0, 0], hyper[0, 1], lam[0, t // 2, 1])
     if ref.fresnel is not None:  # the Fresnel strength k too
         draws, truth = (*draws, res.draws[0, ..., 4].ravel()), (*truth, th[0, 0, 4])
+    if hyper.shape[-1] > 4:  # the day's exposure spread, where the exposure is day-level
+        draws, truth = (*draws, res.material[..., 5].ravel()), (*truth, hyper[0, 5])
     pick = np.linspace(0, len(draws[0]) - 1, n_draws).round().astype(int)
     walkers = gamma.reshape(e * w, -1)[None]
     rhat_walkers = float(diagnostics.diagnose(walkers.astype(float))[0][0])

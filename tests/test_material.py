@@ -6,8 +6,7 @@ import pytest
 from scipy import stats
 
 from bayesgloss import illumination as il
-from bayesgloss.sampling import material as mat
-from bayesgloss.sampling import sample_material
+from bayesgloss.sampling import populations, sample_material
 
 
 def test_albedo_spread_draw_is_its_conditional():
@@ -16,17 +15,34 @@ def test_albedo_spread_draw_is_its_conditional():
     # 4000 draws at alpha 1e-3 for three cases: spread inside the range, far
     # below it (mass piled at the lower bound), and few facets)
     rng = np.random.default_rng(5)
-    lo, hi = il.MATERIAL_LOG_TAU
-    grid = np.linspace(lo, hi, 20001)
     for f, sd in ((24, 0.1), (24, 0.001), (3, 0.5)):
         ss = f * sd**2
-        draws = mat._draw_log_tau(np.full(4000, ss), f, rng)
-        log_dens = -f * grid - 0.5 * ss * np.exp(-2 * grid)
-        cdf = np.cumsum(np.exp(log_dens - log_dens.max()))
-        cdf /= cdf[-1]
-        p = stats.kstest(draws, lambda x, c=cdf: np.interp(x, grid, c)).pvalue
-        assert p > 1e-3, (f, sd, p)
-        assert np.all((draws >= lo) & (draws <= hi))
+        draws = populations.draw_log_spread(np.full(4000, ss), f, rng, il.MATERIAL_LOG_TAU)
+        _assert_log_spread_conditional(draws, ss, f, il.MATERIAL_LOG_TAU)
+
+
+def test_exposure_spread_draw_is_its_conditional():
+    # the day's log exposure spread given the frames' log exposures about
+    # their mean: the same law over the T frames on its own range (KS at alpha
+    # 1e-3: a camera that kept its exposure, one whose exposure jittered, and
+    # few frames)
+    rng = np.random.default_rng(6)
+    for t, sd in ((12, 0.001), (12, 0.2), (4, 1.0)):
+        ss = t * sd**2
+        draws = populations.draw_log_spread(np.full(4000, ss), t, rng, il.EXPOSURE_LOG_SPREAD)
+        _assert_log_spread_conditional(draws, ss, t, il.EXPOSURE_LOG_SPREAD)
+
+
+def _assert_log_spread_conditional(draws, ss, f, bounds):
+    """KS test of draws of log tau against tau^-f exp(-ss / 2 tau^2) on bounds."""
+    lo, hi = bounds
+    grid = np.linspace(lo, hi, 20001)
+    log_dens = -f * grid - 0.5 * ss * np.exp(-2 * grid)
+    cdf = np.cumsum(np.exp(log_dens - log_dens.max()))
+    cdf /= cdf[-1]
+    p = stats.kstest(draws, lambda x: np.interp(x, grid, cdf)).pvalue
+    assert p > 1e-3, (f, ss, p)
+    assert np.all((draws >= lo) & (draws <= hi))
 
 
 @pytest.mark.long
@@ -35,7 +51,9 @@ def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies
     # no usable observation: the posterior is the prior, gamma uniform (mean
     # 1/2, 10 % below 0.1), log tau uniform on its range, the day's sun
     # weights uniform on the simplex (mean 1/3 each), and, with the exposure
-    # unknown, each frame's log exposure N(0, 2^2). A missing Jacobian, a
+    # unknown, the day's log exposure mean N(0, 2^2) and log spread uniform on
+    # its range (each frame's log exposure then of sd sqrt(4 + E sd_e^2) =
+    # 2.19). A missing Jacobian, a
     # wrong conditional of tau or m, or a move that is not reversible (the
     # ridge moves' lattices, the sun's jumps) pulls these off. Tolerances:
     # ~15000 autocorrelated draws, ESS of a few hundred
@@ -66,7 +84,12 @@ def test_without_data_the_one_material_sampler_draws_its_prior(paper_three_skies
     assert res.ess_bulk[1 : 1 + t].min() > 2000, res.ess_bulk[1 : 1 + t]
     if not exposure_known:
         log_e = res.frames[..., 0]
-        assert abs(log_e.mean()) < 0.3 and abs(log_e.std() - q.exposure_sd) < 0.3
+        lo, hi = il.EXPOSURE_LOG_SPREAD
+        sd = np.sqrt(q.exposure_sd**2 + (np.exp(2 * hi) - np.exp(2 * lo)) / (2 * (hi - lo) * 2))
+        assert abs(log_e.mean()) < 0.3 and abs(log_e.std() - sd) < 0.3, (log_e.std(), sd)
+        spread = res.material[..., 5].ravel()
+        assert abs((spread.mean() - lo) / (hi - lo) - 0.5) < 0.08
+        assert abs(res.material[..., 4].mean()) < 0.3
 
 
 @pytest.mark.long
@@ -106,10 +129,16 @@ def test_one_material_reads_gloss_albedo_spread_and_clouded_frames(paper_three_s
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("fresnel", "lobe"),
-    [("none", "phong"), ("radiance", "phong"), ("none", "ggx"), ("none", "ward")],
+    ("fresnel", "lobe", "exposure_known"),
+    [
+        ("none", "phong", True),
+        ("radiance", "phong", True),
+        ("none", "ggx", True),
+        ("none", "ward", True),
+        ("none", "phong", False),
+    ],
 )
-def test_one_material_sbc(paper_three_skies, fresnel, lobe):
+def test_one_material_sbc(paper_three_skies, fresnel, lobe, exposure_known):
     # Simulation-based calibration of the default object model (Talts et al.
     # 2018) with the study's code (studies/sbc_material.py) on a smaller
     # design: 60 objects of 6 facets over 6 frames drawn from the prior,
@@ -123,7 +152,9 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe):
     # Fresnel raise (bayesgloss.fresnel) its strength k is drawn from its
     # prior with the rest, and its ranks are tested too. With the GGX or the
     # Ward lobe (bayesgloss.lobes) the tables are that family's, the sampler
-    # the same.
+    # the same. With the exposure unknown, each frame's log exposure is drawn
+    # about the day's (IlluminationPriors.day_exposure), and the ranks of the
+    # day's log exposure spread are tested too.
     from conftest import study_script
 
     from bayesgloss.pool import process_pool
@@ -131,7 +162,9 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe):
 
     study, path = study_script("sbc_material")
     bases = paper_three_skies if lobe == "phong" else study.paper_three_skies(lobe)
-    ref = study.sbc_design(bases, facets=6, frames=6, fresnel=fresnel)
+    ref = study.sbc_design(
+        bases, facets=6, frames=6, fresnel=fresnel, exposure_known=exposure_known
+    )
     with process_pool(2) as pool:  # the study's objects, importable in every worker
         futures = [
             pool.submit(
@@ -141,10 +174,58 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe):
         ]
         rows = [f.result() for f in futures]
     ranks = np.array([r["ranks"] for r in rows])
-    names = ("gamma", "log_tau", "log_sun", "fresnel_strength")
-    assert ranks.shape[1] == (4 if fresnel == "radiance" else 3)
-    for k, name in enumerate(names[: ranks.shape[1]]):
+    names = ("gamma", "log_tau", "log_sun")
+    names += ("fresnel_strength",) * (fresnel == "radiance")
+    names += ("log_exposure_spread",) * (not exposure_known)
+    assert ranks.shape[1] == len(names)
+    for k, name in enumerate(names):
         counts = np.bincount(ranks[:, k] * 10 // 100, minlength=10)
         assert stats.chisquare(counts).pvalue > 1e-3, (name, counts)
     held = int(np.sum((ranks[:, 0] >= 5) & (ranks[:, 0] <= 94)))
     assert 46 <= held <= 59, held
+
+
+@pytest.mark.long
+def test_a_kept_exposure_ties_the_frames_and_a_varied_one_is_read(paper_three_skies):
+    # the day-level exposure (IlluminationPriors.day_exposure). A single facet
+    # (gamma 0.3, n 100, clear sky) seen by a camera that kept its unknown
+    # exposure: with each frame's exposure free, the curve's level in each
+    # frame tells nothing and gamma's 90 % interval is most of [0, 1] (0.82
+    # wide on this seed); drawn about the day's, the frames are tied, the
+    # interval holds 0.3 and is at most 0.7 times as wide, and the spread
+    # sd_e reads below 0.1. Five facets whose camera varied its exposure by
+    # sd 0.3: gamma's interval still holds 0.3. (The spread itself is not
+    # read there: a frame's exposure and its sun and sky changed together
+    # make the same curve, and the sun's and sky's priors take the change;
+    # sd_e read [0.01, 0.20] on this seed.)
+    full, up = paper_three_skies
+    rng = np.random.default_rng(12)
+
+    def fit(facets, log_e, day):
+        bases = full.take(facets, up)
+        f, t = bases.diffuse.shape[1:]
+        lam = np.zeros((1, 1, t, 5))
+        lam[..., 3], lam[..., 4] = -8.0, -8.0  # the clear sky's shape
+        lam[..., 0] = log_e(t)
+        th = np.zeros((1, f, 1, 4))
+        th[..., 0], th[..., 1], th[..., 3] = 0.3, np.log(100.0), np.log(0.02)
+        th[..., 2] = np.log(0.5)
+        ref = il.joint_data(np.ones((f, t)), np.ones((f, t), bool), bases)
+        y = il.simulate(th, lam, ref, np.random.default_rng(7))[0, :, 0]
+        priors = il.IlluminationPriors(day_exposure=day)
+        data = il.joint_data(y, np.ones((f, t), bool), bases, frame_priors=priors)
+        return sample_material(data, seed=4, min_sweeps=1000, max_sweeps=1000)
+
+    def kept(t):
+        return np.zeros(t)
+
+    free, tied = (fit(slice(0, 1), kept, day) for day in (False, True))
+    q_free = np.quantile(free.draws[0, ..., 0], [0.05, 0.95])
+    q_tied = np.quantile(tied.draws[0, ..., 0], [0.05, 0.95])
+    assert q_tied[0] <= 0.3 <= q_tied[1], q_tied
+    assert np.diff(q_tied)[0] <= 0.7 * np.diff(q_free)[0], (q_tied, q_free)
+    assert np.median(np.exp(tied.material[..., 5])) < 0.1
+    jitter = rng.normal(0.0, 0.3, 200)
+    varied = fit(slice(0, 5), lambda t: jitter[:t] - jitter[:t].mean(), True)
+    q_varied = np.quantile(varied.draws[0, ..., 0], [0.05, 0.95])
+    assert q_varied[0] <= 0.3 <= q_varied[1], q_varied

@@ -25,8 +25,12 @@ runs one problem at a time and its per-step overhead dominates for a
   every walker a whole state), for :mod:`bayesgloss.illumination`;
 - :mod:`~bayesgloss.sampling.material`: :func:`sample_material`, the same
   scheme for the one-material model (shared gamma and n, hierarchical
-  albedo: the object's answer), and :func:`facets_given_frames`, each
-  facet's own posterior given the object's illumination;
+  albedo: the object's answer), with :mod:`~bayesgloss.sampling.populations`
+  (exact draws of its populations' means and spreads) and
+  :mod:`~bayesgloss.sampling.exposure_moves` (the day-level exposure's level
+  and spread moved with the likelihood unchanged);
+- :mod:`~bayesgloss.sampling.facet_answers`: :func:`facets_given_frames`,
+  each facet's own posterior given the object's illumination;
 - :mod:`~bayesgloss.sampling.ridge`: :func:`lattice_shift`, an exact move
   along a ridge whose conditional only the priors shape (the one-material
   sampler's scale and exposure ridges);
@@ -45,9 +49,10 @@ steps.
 
 from .coordinates import RIDGE_MAX_RMS, RidgeCoordinates
 from .ensemble import BatchedEnsemble
+from .facet_answers import facets_given_frames
 from .joint import JointSamples, sample_joint
 from .jumps import ExponentJump
-from .material import facets_given_frames, first_check, sample_material
+from .material import first_check, sample_material
 from .moves import DEFAULT_MOVES, FACET_MOVES, PLAIN_JUMP
 from .posterior import PosteriorSamples, sample_posterior
 from .starts import initial_ensemble

@@ -171,7 +171,7 @@ class _JointChain:
             idx, cidx = halves[k], halves[1 - k]
             ref = np.broadcast_to(self.lam[:, cidx].mean(1, keepdims=True), self.lam[:, idx].shape)
             sub = tuple(p[:, :, idx] for p in parts)
-            chol = self._proposal_factor(th[:, :, idx], ref, sub, log_sigma[:, :, idx])
+            chol = self._proposal_factor(th[:, :, idx], ref, sub, log_sigma[:, :, idx], idx)
             scale = 2.38 / np.sqrt(d) * (0.3 if rng.random() < 0.3 else 1.0)
             z = rng.standard_normal(chol.shape[:-1])
             prop = self.lam[:, idx] + scale * np.einsum("ewtij,ewtj->ewti", chol, z) * self.free
@@ -181,9 +181,10 @@ class _JointChain:
             cur[:, idx] = np.where(ok, new, cur[:, idx])
             self.accepted["frames"] += ok.mean() / 2
 
-    def _proposal_factor(self, th, lam_ref, parts, log_sigma):
+    def _proposal_factor(self, th, lam_ref, parts, log_sigma, walkers=slice(None)):
         """Cholesky factor of the inverse of the frame latents' Fisher
-        information plus the priors' Gaussian precisions, (E, H, T, L, L)."""
+        information plus the priors' Gaussian precisions
+        (:meth:`_prior_precisions` of ``walkers``), (E, H, T, L, L)."""
         data = self.data
         weights = il.frame_weights(lam_ref, data)
         s = np.exp(th[..., 2:3])
@@ -200,6 +201,13 @@ class _JointChain:
             grads.append(np.zeros_like(mu_sky))
         g = np.moveaxis(np.stack(grads, axis=-1), 1, -2)  # (E, H, T, F, L)
         info = np.swapaxes(g * np.moveaxis(weight, 1, -1)[..., None], -1, -2) @ g
+        return proposal_square_root(info, self._prior_precisions(walkers))
+
+    def _prior_precisions(self, walkers=slice(None)) -> np.ndarray:
+        """The frame latents' prior precisions for the proposals, (L,): the
+        sun's cloud component's, the sky's, the exposure's (a huge one where
+        it is known), and about the logistic's for the sky shapes' ratios."""
+        data = self.data
         fp = data.frame_priors
         fixed = 1e12
         ratio = 1.0 / 1.8**2 if data.shapes >= 2 else fixed  # ~ the logistic's sd
@@ -211,7 +219,7 @@ class _JointChain:
                 *[ratio] * (data.n_latents - 3),
             ]
         )
-        return proposal_square_root(info, prior)
+        return prior
 
     # -- collective moves: along the directions Gibbs is slow in ----------------
 
@@ -307,9 +315,7 @@ class _JointChain:
 
     def _exposure_ridge(self) -> None:
         c = 0.5 * self.rng.standard_normal((self.e, self.w, self.t))
-        direction = np.zeros(self.data.n_latents)
-        direction[:3] = 1.0, -1.0, -1.0
-        prop = self.lam + c[..., None] * direction
+        prop = self.lam + c[..., None] * self.data.exposure_direction
         ratio = self._frame_prior(prop) - self._frame_prior(self.lam)
         ok = np.log(self.rng.random(ratio.shape)) < ratio
         self.lam = np.where(ok[..., None], prop, self.lam)

@@ -40,7 +40,9 @@ whole state) with these blocks per sweep:
 3. **each facet's log s given sigma, m and tau**: random-walk Metropolis,
    facets independent, steps from the Fisher information at the data;
 4. **m and log tau given the scales**: exact draws (m normal; tau^-2 a
-   gamma variable truncated to the prior's range);
+   gamma variable truncated to the prior's range); likewise, where the
+   exposure is unknown, **the day's exposure mean and spread given the
+   frames' log exposures** (:func:`bayesgloss.illumination.hyper_size`);
 5. **the day's sun weights** (clear, dimmed, hidden; Dirichlet(1, 1, 1)):
    random-walk Metropolis in log-ratio coordinates. One day-level weight
    for all frames: with each frame's sun clear with a fixed probability
@@ -58,7 +60,8 @@ whole state) with these blocks per sweep:
    + c (the likelihood and the albedo population unchanged), c drawn from
    the conditional that the priors of m and of the frames make on a lattice
    (:mod:`bayesgloss.sampling.ridge`: that conditional is bimodal where the
-   sun is hazy, and a random walk did not cross between its modes).
+   sun is hazy, and a random walk did not cross between its modes); where
+   the exposures are drawn about the day's, the day's mean moves with them.
 
 Where entries clipped at the top code are kept (``clipped="likelihood"``,
 :mod:`bayesgloss.sampling.censored`), each sweep first completes them and
@@ -70,18 +73,16 @@ by their survival term.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
 from .. import fresnel as fr
 from .. import illumination as il
-from . import censored, ridge, schedule
-from .joint import _curve_data_at, _JointChain, starting_frames
+from . import censored, exposure_moves, populations, ridge, schedule
+from .joint import _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
-from .posterior import sample_posterior
 from .schedule import JointSamples, run_chain
 from .starts import _reflect, _robust_scales, starting_material
 
-__all__ = ["sample_material", "first_check", "facets_given_frames"]
+__all__ = ["sample_material", "first_check"]
 
 #: The one-material sampler's schedule (stop 37): burn-in rounds of 100
 #: sweeps, then the stopping rule checked every 100 sweeps from 400 on. The
@@ -131,10 +132,14 @@ class _MaterialChain(_JointChain):
         rms = np.sqrt(np.sum(z[0, :, 0] ** 2, -1) / np.maximum(data.valid.sum(1), 1))
         self.profile_weights = data.relative_weights / np.maximum(rms, 0.003)[:, None] ** 2
         self.lam = lam0 + 0.05 * rng.standard_normal((e, w, *lam0.shape)) * self.free
-        self.hyper = np.zeros((e, w, 4))  # m, log tau, the day's sun weights v1, v2
+        # m, log tau, the day's sun weights v1, v2 (and the day's exposure mu_e, log sd_e)
+        self.hyper = np.zeros((e, w, il.hyper_size(data)))
         self.hyper[..., 0] = th[..., 2].mean(1)
         lt = np.log(np.clip(th[..., 2].std(1), 0.02, 2.0))
         self.hyper[..., 1] = lt
+        if self.hyper.shape[-1] > 4:  # the frames' exposures' mean and spread
+            self.hyper[..., 4] = self.lam[..., 0].mean(-1)
+            self.hyper[..., 5] = np.log(np.clip(self.lam[..., 0].std(-1), 0.02, 1.0))
         self._moves = [move_named(name) for name, _ in DEFAULT_MOVES]
         self._cdf = np.cumsum([x for _, x in DEFAULT_MOVES])
         self._cdf /= self._cdf[-1]
@@ -145,6 +150,8 @@ class _MaterialChain(_JointChain):
             precision = 1 / il.MATERIAL_M_SD**2 + self.t * (
                 1 / fp.sun_clear_sd**2 + 1 / fp.sky_sd**2
             )
+        elif self.hyper.shape[-1] > 4:  # the ridge carries the day's exposure mean too
+            precision = 1 / il.MATERIAL_M_SD**2 + 1 / fp.exposure_sd**2
         else:
             precision = 1 / il.MATERIAL_M_SD**2 + self.t / fp.exposure_sd**2
         self.scale_step = 1.0 / np.sqrt(precision)
@@ -339,6 +346,9 @@ class _MaterialChain(_JointChain):
         self._sun_jump(self.th, parts, log_sigma)
         if not data.exposure_known:
             self._exposure_ridge()
+            if self.hyper.shape[-1] > 4:  # the day's exposure level and spread
+                exposure_moves.level_ridge(self)
+                exposure_moves.spread_move(self)
         self._scale_ridge()
         self.collective_moves()
         self.sweeps += 1
@@ -354,7 +364,19 @@ class _MaterialChain(_JointChain):
 
     def _frame_prior(self, lam, walkers=slice(None), hyper=None):
         hyper = self.hyper[:, walkers] if hyper is None else hyper
-        return il.log_prior_frames(lam, self.data, il.log_sun_weights(hyper))
+        return il.log_prior_frames(
+            lam, self.data, il.log_sun_weights(hyper), exposure=il.exposure_day(hyper)
+        )
+
+    def _prior_precisions(self, walkers=slice(None)) -> np.ndarray:
+        """As the joint sampler's, with each walker's own precision of log
+        e_t about the day's where the exposure is day-level, (E, H, 1, L)."""
+        prior = super()._prior_precisions(walkers)
+        if self.hyper.shape[-1] <= 4:
+            return prior
+        out = np.broadcast_to(prior, (*self.hyper[:, walkers].shape[:2], 1, len(prior))).copy()
+        out[..., 0, 0] = np.exp(-2 * self.hyper[:, walkers, 5])
+        return out
 
     def _sun_weight_step(self, tries: int = 3) -> None:
         """Random-walk Metropolis on the day's sun weights (v_1, v_2) given the
@@ -376,16 +398,23 @@ class _MaterialChain(_JointChain):
             cur = np.where(ok, new, cur)
 
     def _hyper_draw(self) -> None:
-        """m and log tau from their exact conditionals given the scales (module docstring)."""
+        """m and log tau from their exact conditionals given the scales (module
+        docstring); where the exposure is day-level, mu_e and log sd_e given
+        the frames' log exposures alike (mu_e's prior N(0, exposure_sd^2))."""
         rng, log_s = self.rng, self.th[..., 2]  # (E, F, W)
         c0 = il.material_m_center(self.data)
-        tau = np.exp(self.hyper[..., 1])
-        prec = self.f / tau**2 + 1 / il.MATERIAL_M_SD**2
-        mean = (log_s.sum(1) / tau**2 + c0 / il.MATERIAL_M_SD**2) / prec
-        m = mean + rng.standard_normal(mean.shape) / np.sqrt(prec)
+        m = populations.draw_mean(log_s, 1, self.hyper[..., 1], c0, il.MATERIAL_M_SD, rng)
         self.hyper[..., 0] = m
         ss = np.sum((log_s - m[:, None]) ** 2, axis=1)
-        self.hyper[..., 1] = _draw_log_tau(ss, self.f, rng)
+        self.hyper[..., 1] = populations.draw_log_spread(ss, self.f, rng, il.MATERIAL_LOG_TAU)
+        if self.hyper.shape[-1] > 4:  # the frames' log exposures, (E, W, T)
+            log_e, s0 = self.lam[..., 0], self.data.frame_priors.exposure_sd
+            mu = populations.draw_mean(log_e, -1, self.hyper[..., 5], 0.0, s0, rng)
+            ss = np.sum((log_e - mu[..., None]) ** 2, axis=-1)
+            self.hyper[..., 4] = mu
+            self.hyper[..., 5] = populations.draw_log_spread(
+                ss, self.t, rng, il.EXPOSURE_LOG_SPREAD
+            )
 
     def _scale_ridge(self) -> None:
         """Block 7: every log s_f and m down by c, every frame's brightness up
@@ -404,10 +433,17 @@ class _MaterialChain(_JointChain):
         c = ridge.lattice_offsets(RIDGE_REACH)[:, None, None] * h  # (K, E, W)
         m = self.hyper[..., 0]
         lam = self.lam[None] + c[..., None, None] * shift
-        lp = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam, hyper=self.hyper).sum(-1)
+        # where the frames' exposures are drawn about the day's, its mean moves with them
+        day = self.hyper.shape[-1] > 4
+        hyper = exposure_moves.mean_shifted(self.hyper, c) if day else self.hyper
+        lp = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam, hyper=hyper).sum(-1)
+        if day:
+            lp = lp + exposure_moves.log_prior_mean(hyper, self.data)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W)
         self.th[..., 2] -= moved[:, None, :]
         self.hyper[..., 0] -= moved
+        if day:
+            self.hyper[..., 4] += moved
         self.lam = self.lam + moved[:, :, None, None] * shift
         self.accepted["scale"] += np.mean(moved != 0)
 
@@ -442,8 +478,7 @@ class _MaterialChain(_JointChain):
         :meth:`_scale_ridge`, on a lattice of spacing u x 0.5, u uniform on
         [0.2, 0.6]: the frame's conditional along it is its prior's, as
         bimodal as the scale ridge's where the sun is hazy."""
-        direction = np.zeros(self.data.n_latents)
-        direction[:3] = 1.0, -1.0, -1.0
+        direction = self.data.exposure_direction
         h = 0.5 * self.rng.uniform(0.2, 0.6)
         c = ridge.lattice_offsets(RIDGE_REACH) * h
         lam = self.lam[None] + c[:, None, None, None, None] * direction
@@ -485,7 +520,9 @@ class _MaterialChain(_JointChain):
         f, k, ns = self.f, int(self.free.sum()), len(self.shared)
         blocks = [slice(0, ns)] + [slice(ns + i, ns + 1 + i) for i in range(f)]
         nh = self.hyper.shape[-1]
-        blocks += [slice(ns + f, ns + 2 + f), slice(ns + 2 + f, ns + f + nh)]
+        blocks += [slice(ns + f, ns + 2 + f), slice(ns + 2 + f, ns + f + min(nh, 4))]
+        if nh > 4:  # the day's exposure mean and spread
+            blocks.append(slice(ns + f + 4, ns + f + nh))
         o = ns + f + nh
         blocks += [slice(o + k * i, o + k * (i + 1)) for i in range(self.t)]
         return blocks
@@ -495,26 +532,6 @@ class _MaterialChain(_JointChain):
 
     def _assign(self, parts) -> None:
         self.th, self.hyper, self.lam = parts
-
-
-def _draw_log_tau(ss, f: int, rng) -> np.ndarray:
-    """log tau given the scales' sum of squares about m, (E, W): tau^-2 ~
-    Gamma(F / 2, rate SS / 2) truncated to the prior's range (log tau uniform)."""
-    lo, hi = il.MATERIAL_LOG_TAU
-    k = 0.5 * f
-    rate = np.maximum(0.5 * ss, 1e-300)
-    x_lo, x_hi = np.exp(-2 * hi), np.exp(-2 * lo)  # tau^-2 between
-    c_lo, c_hi = special.gammainc(k, rate * x_lo), special.gammainc(k, rate * x_hi)
-    u = c_lo + (c_hi - c_lo) * rng.random(ss.shape)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        x = special.gammaincinv(k, u) / rate
-        log_tau = -0.5 * np.log(x)
-    # the truncation's mass underflows when the scales are far tighter (or
-    # wider) than the prior's range allows: tau at the bound nearest its mode
-    mode = 0.5 * np.log(np.maximum(ss, 1e-300) / max(f, 1))
-    edge = np.where(mode < lo, lo, hi)
-    bad = ~np.isfinite(log_tau) | (c_hi - c_lo <= 0)
-    return np.clip(np.where(bad, edge, log_tau), lo, hi)
 
 
 def sample_material(
@@ -548,7 +565,8 @@ def sample_material(
     -------
     JointSamples
         ``draws`` (F, E, S, 4) with every facet's gamma and log n the shared
-        ones; ``material`` (E, S, 2): m and log tau; diagnostics of gamma
+        ones; ``material`` (E, S, H): the day-level coordinates
+        (:data:`bayesgloss.illumination.HYPER`); diagnostics of gamma
         (first) and of every frame's log a and log b.
     """
     return run_chain(
@@ -588,48 +606,3 @@ def first_check(
         draws_per_ensemble=draws_per_ensemble,
         n_walkers=n_walkers,
     )
-
-
-def facets_given_frames(data: il.JointData, frames, *, copies: int = 2, seed: int = 0, **options):
-    """Each facet's own (gamma, log n, log s, log sigma) given the object's
-    illumination, (F, E, S, 4), for the one-material model's frame draws
-    ``frames`` (E, S, T, L).
-
-    The per-facet answers beside the object's: every facet sampled alone
-    (its own gamma, n and scale, :func:`bayesgloss.sampling.sample_posterior`)
-    with the frames fixed at ``copies`` draws of each ensemble of the
-    object's posterior, the copies' draws pooled (multiple imputation: the
-    facet's posterior averaged over the illumination's, which the one
-    material decided; a facet's departure from the material does not feed
-    back into the light). Chain e of the result pools the copies from
-    ensemble e, so R-hat across chains sees the illumination's spread too.
-    ``options`` go to :func:`~bayesgloss.sampling.sample_posterior`.
-
-    Returns
-    -------
-    draws : ndarray (F, E, S, 4)
-    samples : bayesgloss.sampling.PosteriorSamples
-        The facet sampler's run over the E ``copies`` F facet copies.
-    """
-    e, s = frames.shape[:2]
-    f = data.shape[0]
-    picks = np.linspace(0, s - 1, copies + 2)[1:-1].round().astype(int)
-    parts = [_curve_data_at(data, frames[i, j]) for i in range(e) for j in picks]
-    first = parts[0]
-    stacked = type(first)(
-        np.concatenate([p.y for p in parts]),
-        np.concatenate([p.valid for p in parts]),
-        np.concatenate([p.censored for p in parts]),
-        np.concatenate([p.diffuse for p in parts]),
-        np.concatenate([p.glossy for p in parts]),
-        first.log_n_grid,
-        np.concatenate([p.log_s_center for p in parts]),
-        priors=first.priors,
-    )
-    out = sample_posterior(stacked, seed=seed, **options)
-    draws = out.draws  # (E copies F, E', S', 4)
-    draws = draws.reshape(e, copies, f, -1, draws.shape[-1])  # (E, copies, F, E' S', 4)
-    pooled = draws.transpose(2, 0, 1, 3, 4).reshape(f, e, -1, draws.shape[-1])
-    rng = np.random.default_rng(seed)
-    take = np.sort(rng.choice(pooled.shape[2], size=s, replace=pooled.shape[2] < s))
-    return pooled[:, :, take], out

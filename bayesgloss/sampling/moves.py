@@ -148,7 +148,8 @@ def proposal_square_root(info, prior) -> np.ndarray:
 
     ``info`` is a Gauss-Newton information matrix of the data (positive
     semi-definite in exact arithmetic) and ``prior`` the positive diagonal
-    of the priors' precisions. The Cholesky factor of the inverse where it
+    of the priors' precisions, (L,) or (..., L) broadcasting with ``info``'s
+    leading axes. The Cholesky factor of the inverse where it
     exists; where rounding made a matrix indefinite (a huge precision for a
     latent held fixed beside data of another scale: a holdout sequence
     under a fixed gensky shape stopped a run, stop 28), or ``info`` is not
@@ -157,13 +158,15 @@ def proposal_square_root(info, prior) -> np.ndarray:
     floored at the smallest prior precision, the least the exact matrix can
     have (non-finite entries of ``info`` set to 0 first).
     """
-    full = info + np.diag(prior)
+    prior = np.asarray(prior, dtype=float)
+    diag = prior[..., :, None] * np.eye(prior.shape[-1])
+    full = info + diag
     try:
         return np.linalg.cholesky(np.linalg.inv(full))
     except np.linalg.LinAlgError:
         pass
     info = np.where(np.isfinite(info), info, 0.0)
-    full = 0.5 * (info + np.swapaxes(info, -1, -2)) + np.diag(prior)
+    full = 0.5 * (info + np.swapaxes(info, -1, -2)) + diag
     values, vectors = np.linalg.eigh(full)
-    values = np.maximum(values, np.min(prior))
+    values = np.maximum(values, np.min(prior, axis=-1, keepdims=True))
     return vectors / np.sqrt(values)[..., None, :]

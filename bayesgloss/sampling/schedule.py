@@ -77,8 +77,10 @@ class JointSamples:
     acceptance : dict
         Acceptance rates of the facet and frame moves.
     seconds : float
-    material : ndarray (E, S, 2) or None
-        The one-material model's m and log tau (:mod:`bayesgloss.sampling.material`).
+    material : ndarray (E, S, H) or None
+        The one-material model's day-level coordinates
+        (:data:`bayesgloss.illumination.HYPER`: m, log tau, the sun weights'
+        log ratios, and where the exposure is day-level its mean and log spread).
     data : bayesgloss.illumination.JointData or None
         The data sampled (set by :func:`bayesgloss.joint_estimate.joint_fit`).
     facets : bayesgloss.sampling.PosteriorSamples or None
