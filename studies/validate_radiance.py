@@ -92,7 +92,9 @@ METHODS = (
 #: ``equal-near``, its second, branch ``equal-near`` (equal weights only among
 #: the families not beyond doubt behind the best where PSIS-LOO is unreliable),
 #: and ``day-exposure``, Mitsuba holdout 4's, branch ``day-exposure`` (each
-#: frame's unknown exposure drawn about the day's; "Mitsuba holdout 4").
+#: frame's unknown exposure drawn about the day's; "Mitsuba holdout 4"), on
+#: the default (so in ``perez``) since stop 47: scores of ``perez`` cached
+#: before then are the frames' exposures each free on its own.
 SCORED_ELSEWHERE = {
     "lobe-floor": "perez",
     "cie-families": "perez",
