@@ -100,6 +100,7 @@ __all__ = [
     "HYPER",
     "hyper_size",
     "exposure_day",
+    "log_prior_exposure_mean",
     "MATERIAL_M_SD",
     "MATERIAL_LOG_TAU",
     "unit_parts",
@@ -568,6 +569,12 @@ def exposure_day(hyper):
     return hyper[..., 4:6] if hyper.shape[-1] > 4 else None
 
 
+def log_prior_exposure_mean(hyper, data: JointData) -> np.ndarray:
+    """Log prior of the day's mean log exposure mu_e, N(0, ``exposure_sd``^2)
+    up to its constant, of a hyper (..., 6) (:data:`HYPER`): (...)."""
+    return -0.5 * (hyper[..., 4] / data.frame_priors.exposure_sd) ** 2
+
+
 def material_m_center(data: JointData) -> float:
     """The prior centre of m: the median over facets of the data's log scale."""
     return float(np.median(data.log_s_center))
@@ -599,7 +606,7 @@ def log_prior_material(theta, hyper, data: JointData) -> np.ndarray:
     if hyper.shape[-1] > 2:  # the day's sun weights, uniform on the simplex
         lp = lp + np.sum(log_sun_weights(hyper), axis=-1)
     if hyper.shape[-1] > 4:  # the day's exposure: mu_e normal, log sd_e uniform
-        lp = lp - 0.5 * (hyper[..., 4] / data.frame_priors.exposure_sd) ** 2
+        lp = lp + log_prior_exposure_mean(hyper, data)
         inside &= (hyper[..., 5] >= EXPOSURE_LOG_SPREAD[0]) & (
             hyper[..., 5] <= EXPOSURE_LOG_SPREAD[1]
         )

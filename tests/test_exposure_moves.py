@@ -39,8 +39,8 @@ def test_exposure_direction_leaves_every_curve_unchanged(paper_three_skies):
 
 def test_mean_shift_and_its_prior():
     # mean_shifted moves mu_e (column 4 of the hyper) only, broadcast over
-    # the shifts; log_prior_mean is N(0, exposure_sd^2)'s log density up to
-    # a constant: at mu_e = 2 sd it is -2.
+    # the shifts; il.log_prior_exposure_mean is N(0, exposure_sd^2)'s log
+    # density up to a constant: at mu_e = 2 sd it is -2.
     hyper = np.arange(12.0).reshape(2, 6)
     c = np.array([[0.5, -1.0], [2.0, 0.0]])  # (K, E)
     out = exposure_moves.mean_shifted(hyper, c)
@@ -55,7 +55,7 @@ def test_mean_shift_and_its_prior():
 
     h = np.zeros(6)
     h[4] = 2.0 * Data.frame_priors.exposure_sd
-    assert exposure_moves.log_prior_mean(h, Data) == pytest.approx(-2.0)
+    assert il.log_prior_exposure_mean(h, Data) == pytest.approx(-2.0)
 
 
 def test_a_known_exposure_leaves_the_day_level_exposure_out(paper_three_skies):

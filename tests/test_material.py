@@ -9,28 +9,28 @@ from bayesgloss import illumination as il
 from bayesgloss.sampling import populations, sample_material
 
 
-def test_albedo_spread_draw_is_its_conditional():
-    # log tau given the scales: density tau^-F exp(-SS / 2 tau^2) on the prior's
-    # range; the inverse-CDF draws must match a numerical CDF of it (KS test on
-    # 4000 draws at alpha 1e-3 for three cases: spread inside the range, far
-    # below it (mass piled at the lower bound), and few facets)
-    rng = np.random.default_rng(5)
-    for f, sd in ((24, 0.1), (24, 0.001), (3, 0.5)):
-        ss = f * sd**2
-        draws = populations.draw_log_spread(np.full(4000, ss), f, rng, il.MATERIAL_LOG_TAU)
-        _assert_log_spread_conditional(draws, ss, f, il.MATERIAL_LOG_TAU)
-
-
-def test_exposure_spread_draw_is_its_conditional():
-    # the day's log exposure spread given the frames' log exposures about
-    # their mean: the same law over the T frames on its own range (KS at alpha
-    # 1e-3: a camera that kept its exposure, one whose exposure jittered, and
-    # few frames)
-    rng = np.random.default_rng(6)
-    for t, sd in ((12, 0.001), (12, 0.2), (4, 1.0)):
-        ss = t * sd**2
-        draws = populations.draw_log_spread(np.full(4000, ss), t, rng, il.EXPOSURE_LOG_SPREAD)
-        _assert_log_spread_conditional(draws, ss, t, il.EXPOSURE_LOG_SPREAD)
+@pytest.mark.parametrize(
+    "seed, bounds, cases",
+    [
+        # the albedo's log tau given the facets' scales: spread inside the
+        # range, far below it (mass piled at the lower bound), few facets
+        (5, il.MATERIAL_LOG_TAU, ((24, 0.1), (24, 0.001), (3, 0.5))),
+        # the day's log exposure spread given the frames' log exposures: a
+        # camera that kept its exposure, one whose exposure jittered, few frames
+        (6, il.EXPOSURE_LOG_SPREAD, ((12, 0.001), (12, 0.2), (4, 1.0))),
+    ],
+    ids=["albedo", "exposure"],
+)
+def test_log_spread_draw_is_its_conditional(seed, bounds, cases):
+    # log tau given the sum of squares SS of n values about their mean:
+    # density tau^-n exp(-SS / 2 tau^2) on the prior's range; the
+    # inverse-CDF draws must match a numerical CDF of it (KS test on 4000
+    # draws at alpha 1e-3 for each case)
+    rng = np.random.default_rng(seed)
+    for n, sd in cases:
+        ss = n * sd**2
+        draws = populations.draw_log_spread(np.full(4000, ss), n, rng, bounds)
+        _assert_log_spread_conditional(draws, ss, n, bounds)
 
 
 def _assert_log_spread_conditional(draws, ss, f, bounds):

@@ -27,7 +27,7 @@ import numpy as np
 from .. import illumination as il
 from . import ridge
 
-__all__ = ["level_ridge", "spread_move", "mean_shifted", "log_prior_mean", "LEVEL_REACH"]
+__all__ = ["level_ridge", "spread_move", "mean_shifted", "LEVEL_REACH"]
 
 #: The reach of the level ridge's lattice, in steps
 #: (:func:`~bayesgloss.sampling.ridge.lattice_shift`).
@@ -41,12 +41,6 @@ def mean_shifted(hyper, c) -> np.ndarray:
     return hyper + c[..., None] * np.eye(hyper.shape[-1])[4]
 
 
-def log_prior_mean(hyper, data) -> np.ndarray:
-    """Log prior of the day's mean log exposure, N(0, exposure_sd^2) up to a
-    constant, of a hyper (..., 6): (...)."""
-    return -0.5 * (hyper[..., 4] / data.frame_priors.exposure_sd) ** 2
-
-
 def level_ridge(chain) -> None:
     """Every frame's log exposure and the day's mean up by c, every frame's
     log sun and log sky down by c, c drawn on a lattice of spacing u x the
@@ -58,7 +52,9 @@ def level_ridge(chain) -> None:
     c = ridge.lattice_offsets(LEVEL_REACH)[:, None, None] * h  # (K, E, W)
     lam = chain.lam[None] + c[..., None, None] * direction
     hyper = mean_shifted(chain.hyper[None], c)
-    lp = chain._frame_prior(lam, hyper=hyper).sum(-1) + log_prior_mean(hyper, chain.data)
+    lp = chain._frame_prior(lam, hyper=hyper).sum(-1) + il.log_prior_exposure_mean(
+        hyper, chain.data
+    )
     moved = ridge.lattice_shift(lp, LEVEL_REACH, chain.rng) * h  # (E, W)
     chain.lam = chain.lam + moved[..., None, None] * direction
     chain.hyper[..., 4] += moved

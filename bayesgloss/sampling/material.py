@@ -438,7 +438,7 @@ class _MaterialChain(_JointChain):
         hyper = exposure_moves.mean_shifted(self.hyper, c) if day else self.hyper
         lp = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam, hyper=hyper).sum(-1)
         if day:
-            lp = lp + exposure_moves.log_prior_mean(hyper, self.data)
+            lp = lp + il.log_prior_exposure_mean(hyper, self.data)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W)
         self.th[..., 2] -= moved[:, None, :]
         self.hyper[..., 0] -= moved
