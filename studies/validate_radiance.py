@@ -67,12 +67,14 @@ SETS = {
     "validation_holdout13": "validation_holdout13",
     "validation_holdout14": "validation_holdout14",
     "validation_holdout15": "validation_holdout15",
+    "validation_holdout16": "validation_holdout16",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
     "mitsuba_holdout3": "validation_mitsuba_holdout3",
     "mitsuba_holdout4": "validation_mitsuba_holdout4",
     "mitsuba_holdout5": "validation_mitsuba_holdout5",
+    "mitsuba_holdout6": "validation_mitsuba_holdout6",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -144,6 +146,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout3": ("families", "materials"),
     "mitsuba_holdout4": ("baseline", "perez"),
     "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
+    "mitsuba_holdout6": ("baseline", "perez"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -156,6 +159,7 @@ DEFAULT_METHODS = {
     "validation_holdout13": ("baseline", "perez"),  # and cie-families, equal-near, merged
     "validation_holdout14": ("baseline", "perez"),
     "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
+    "validation_holdout16": ("baseline", "perez"),
 }
 
 
