@@ -83,7 +83,7 @@ QUANTILE_LEVELS = (np.arange(200) + 0.5) / 200
 METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
-    "lobe-floor", "cie-families", "equal-near", "day-exposure",
+    "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -138,6 +138,9 @@ ESTIMATES = {
         "perez_families": True,
     },
 }
+# holdout 16's candidate (stop 48): the default with the convex object's shadow on
+# the ground (``estimate --ground-shadow convex``, bayesgloss.object_shadow)
+ESTIMATES["ground-shadow"] = {**ESTIMATES["perez"], "ground_shadow": "convex"}
 #: Methods scored by default on a set that has none cached (``--methods``).
 DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
@@ -146,7 +149,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout3": ("families", "materials"),
     "mitsuba_holdout4": ("baseline", "perez"),
     "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
-    "mitsuba_holdout6": ("baseline", "perez"),
+    "mitsuba_holdout6": ("baseline", "perez", "ground-shadow"),
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -159,7 +162,7 @@ DEFAULT_METHODS = {
     "validation_holdout13": ("baseline", "perez"),  # and cie-families, equal-near, merged
     "validation_holdout14": ("baseline", "perez"),
     "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
-    "validation_holdout16": ("baseline", "perez"),
+    "validation_holdout16": ("baseline", "perez", "ground-shadow"),
 }
 
 
