@@ -27,7 +27,9 @@ colour enters as its luminance, which the ratio's constant absorbs.
 
 Reported per sequence (``results/forward_check_<set>.json``): per facet
 the spread of the log ratio over frames with the sun up (max - min, and
-its standard deviation), and the spread of all facets' log ratios about
+its standard deviation) over the facets the estimator fits by default (at
+least 4 such frames, not facing the ground: :mod:`bayesgloss.ground_facing`),
+and the spread of all facets' log ratios about
 one common value (the object's one albedo: a facet lit wrongly on average
 shows here, not in its own spread); per forward model.
 
@@ -53,6 +55,7 @@ sys.path.insert(0, str(HERE.parent))
 
 from bayesgloss import bundle as bundle_io  # noqa: E402
 from bayesgloss import reflectance, render, sequences, sky  # noqa: E402
+from bayesgloss.ground_facing import GROUND_FACING_NZ  # noqa: E402
 from bayesgloss.object_shadow import shadow_points  # noqa: E402
 
 #: Radiance's luminance of an RGB triple (its ``bright`` macro), [-].
@@ -174,7 +177,9 @@ def check(path: Path, config: sequences.SequenceConfig) -> dict:
     b = bundle_io.read_bundle(path)
     curves = bundle_io.facet_curves(b)
     y = np.where(curves.valid & b.sun_up[None, :], curves.luminance, np.nan)
-    checked = np.isfinite(y).sum(axis=1) >= MIN_FRAMES
+    facing_down = np.asarray(b.facets.normal)[:, 2] < GROUND_FACING_NZ
+    # the facets the estimator fits by default: enough frames, not facing the ground
+    checked = (np.isfinite(y).sum(axis=1) >= MIN_FRAMES) & ~facing_down
     day = true_sky(config, b.sun_direction)
     out = {
         "name": config.name.removesuffix("-clean"),
@@ -184,6 +189,7 @@ def check(path: Path, config: sequences.SequenceConfig) -> dict:
         "roughness": config.roughness,
         "sky": config.sky,
         "facets": int(checked.sum()),
+        "facing_ground_left_out": int(facing_down.sum()),
         "normal_z": np.asarray(b.facets.normal)[checked, 2].round(3).tolist(),
     }
     if not checked.any():
@@ -203,7 +209,7 @@ def main(argv=None) -> None:
     which = range(len(drawn)) if args.which is None else map(int, args.which.split(","))
     configs = [clean_config(drawn[i]["config"]) for i in which]
     paths = sequences.render_bundles(configs, CACHE, jobs=args.jobs, progress=False)
-    rows = [check(Path(p), c) for p, c in zip(paths, configs)]
+    rows = [check(Path(p), c) for p, c in zip(paths, configs, strict=True)]
     for r in rows:
         if "none" not in r:
             print(f"{r['name']}: no facet with {MIN_FRAMES} sun-up frames")
