@@ -13,11 +13,14 @@ facet the same ratio in every frame (the camera's luminance unit, 179 for
 Radiance's lm/W); what the ratio does over the frames is what a fit must
 put into gloss, the sky's latent brightnesses, or its residuals.
 
-Two forward models are checked: the default's (facet centres, the ground
+Forward models checked: the default's (facet centres, the ground
 sunlit everywhere, ``estimate --ground-shadow none``) and the convex
 object's shadow on the ground (``--ground-shadow convex``: the object the
 facets bound shadows the ground at its foot, bases averaged over points of
-each facet, :mod:`bayesgloss.object_shadow`). Materials as Radiance makes
+each facet, :mod:`bayesgloss.object_shadow`), that shadow in the diffuse
+part only, and the shadow with a rough material's lobe by Radiance's own
+rules (:mod:`bayesgloss.radiance_ward`) in place of the integrated Ward
+lobe the estimator fits. Materials as Radiance makes
 them: plastic (white specular part of specularity s, coloured diffuse part
 (1 - s) colour) and metal (both parts coloured), rough ones with the Ward
 lobe of Radiance's normalisation (:func:`bayesgloss.render.ward_facet_bases`),
@@ -57,6 +60,7 @@ from bayesgloss import bundle as bundle_io  # noqa: E402
 from bayesgloss import reflectance, render, sequences, sky  # noqa: E402
 from bayesgloss.ground_facing import GROUND_FACING_NZ  # noqa: E402
 from bayesgloss.object_shadow import shadow_points  # noqa: E402
+from bayesgloss.radiance_ward import radiance_ward_glossy_basis  # noqa: E402
 
 #: Radiance's luminance of an RGB triple (its ``bright`` macro), [-].
 RADIANCE_LUMINANCE = np.array([0.265, 0.670, 0.065])
@@ -101,11 +105,16 @@ def true_sky(config: sequences.SequenceConfig, sun_direction):
     )
 
 
-def material_prediction(geometry, day, config: sequences.SequenceConfig, glossy_geometry=None):
+def material_prediction(
+    geometry, day, config: sequences.SequenceConfig, glossy_geometry=None, rough="integrated"
+):
     """Radiance toward the camera of the true material, (F, T), in the
     material's luminance (the colour's luminance times the parts); the
     glossy part on ``glossy_geometry`` where given (the same points, e.g.
-    without the occluder), else on ``geometry``."""
+    without the occluder), else on ``geometry``; a rough material's lobe
+    ``"integrated"`` (:func:`bayesgloss.render.ward_glossy_basis`, the
+    estimator's Ward family) or ``"radiance"`` (Radiance's own rules,
+    :mod:`bayesgloss.radiance_ward`)."""
     glossy_geometry = geometry if glossy_geometry is None else glossy_geometry
     colour = np.broadcast_to(np.asarray(config.colour, dtype=float), 3)
     lum = float(RADIANCE_LUMINANCE @ colour)
@@ -123,7 +132,8 @@ def material_prediction(geometry, day, config: sequences.SequenceConfig, glossy_
             out = out + mat.specular * render.mirror_radiance(glossy_geometry, day, **common)
         return out
     diffuse = render.diffuse_basis(geometry, day, **common)
-    glossy = render.ward_glossy_basis(glossy_geometry, day, [alpha], **common)[:, 0, :]
+    lobe = render.ward_glossy_basis if rough == "integrated" else radiance_ward_glossy_basis
+    glossy = lobe(glossy_geometry, day, [alpha], **common)[:, 0, :]
     specular = s * (lum if config.material == "metal" else 1.0)
     return lum * (1.0 - s) * diffuse + specular * glossy
 
@@ -132,7 +142,8 @@ def predictions(b, day, config, checked) -> dict:
     """The forward model's prediction of the ``checked`` facets, (F, T):
     ``none`` (facet centres, no shadow: the default), ``convex`` (points
     over each facet, the convex object's ground shadow in both parts) and
-    ``convex-diffuse`` (the shadow in the diffuse part only)."""
+    ``convex-diffuse`` (the shadow in the diffuse part only), and
+    ``convex-radiance`` (``convex`` with Radiance's own rough-specular rules)."""
     geometry = b.view_geometry()
     idx = np.flatnonzero(checked)
     plain = render.ViewGeometry(
@@ -151,6 +162,7 @@ def predictions(b, day, config, checked) -> dict:
         "none": material_prediction(plain, day, config),
         "convex": per_facet(material_prediction(points, day, config)),
         "convex-diffuse": per_facet(material_prediction(points, day, config, unshadowed)),
+        "convex-radiance": per_facet(material_prediction(points, day, config, rough="radiance")),
     }
 
 
@@ -220,7 +232,8 @@ def main(argv=None) -> None:
             f"{r['convex']['max_facet_range']:.3f} diffuse-only "
             f"{r['convex-diffuse']['max_facet_range']:.3f}; object sd none "
             f"{r['none']['object_sd']:.3f} convex {r['convex']['object_sd']:.3f} "
-            f"diffuse-only {r['convex-diffuse']['object_sd']:.3f}"
+            f"diffuse-only {r['convex-diffuse']['object_sd']:.3f} "
+            f"radiance rules {r['convex-radiance']['object_sd']:.3f}"
         )
     suffix = "" if args.which is None else "_" + args.which.replace(",", "-")
     out = RESULTS / f"forward_check_{args.set}{suffix}.json"
