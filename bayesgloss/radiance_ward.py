@@ -57,8 +57,11 @@ from . import render
 
 __all__ = ["radiance_ward_sun_brdf", "sampled_fraction", "radiance_ward_glossy_basis"]
 
-#: Gauss-Laguerre nodes in t = tan^2 delta / alpha^2 and azimuth steps of h.
-N_T, N_PHI = 24, 32
+#: Gauss-Laguerre nodes in t = tan^2 delta / alpha^2 and azimuth steps of h:
+#: :func:`bayesgloss.render.ward_glossy_basis`'s, at its cost; within 1.5 % of
+#: 48 x 64 nodes at a view 12 degrees above the surface for alpha up to 0.4,
+#: within 0.2 % from 30 degrees up.
+N_T, N_PHI = 12, 16
 #: Radiance's smallest view cosine in ``dirnorm`` (``nd.pdot``).
 MIN_COS_VIEW = 1e-3
 
