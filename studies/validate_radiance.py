@@ -68,6 +68,7 @@ SETS = {
     "validation_holdout14": "validation_holdout14",
     "validation_holdout15": "validation_holdout15",
     "validation_holdout16": "validation_holdout16",
+    "validation_holdout17": "validation_holdout17",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -75,6 +76,7 @@ SETS = {
     "mitsuba_holdout4": "validation_mitsuba_holdout4",
     "mitsuba_holdout5": "validation_mitsuba_holdout5",
     "mitsuba_holdout6": "validation_mitsuba_holdout6",
+    "mitsuba_holdout7": "validation_mitsuba_holdout7",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -84,6 +86,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
+    "radiance-ward",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -102,6 +105,9 @@ SCORED_ELSEWHERE = {
     "cie-families": "perez",
     "equal-near": "perez",
     "day-exposure": "perez",
+    # holdout 17's candidate, branch radiance-ward: the ward lobe family by
+    # Radiance's own rough-specular rules (bayesgloss.radiance_ward)
+    "radiance-ward": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -150,6 +156,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout4": ("baseline", "perez"),
     "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
     "mitsuba_holdout6": ("baseline", "perez", "ground-shadow"),
+    "mitsuba_holdout7": ("baseline", "perez"),  # and radiance-ward, merged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -163,6 +170,7 @@ DEFAULT_METHODS = {
     "validation_holdout14": ("baseline", "perez"),
     "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
     "validation_holdout16": ("baseline", "perez", "ground-shadow"),
+    "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
 }
 
 
