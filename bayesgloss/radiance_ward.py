@@ -110,27 +110,40 @@ def _nodes(roughness, n_t: int, n_phi: int):
 
 
 def sampled_fraction(
-    geometry: render.ViewGeometry, roughness, n_t: int = N_T, n_phi: int = N_PHI
+    geometry: render.ViewGeometry,
+    roughness,
+    n_t: int = N_T,
+    n_phi: int = N_PHI,
+    chunk: int = 16,
 ) -> np.ndarray:
     """The share of Radiance's drawn reflected directions that lie above the
-    surface, (F, N): 1 at normal view, less toward grazing views."""
+    surface, (F, N): 1 at normal view, less toward grazing views (``chunk``
+    facets at a time, which bounds memory)."""
     cd, sd, w = _nodes(roughness, n_t, n_phi)
     normal = np.asarray(geometry.normal, dtype=float)
     view = np.asarray(geometry.view_direction, dtype=float)
     t1, t2 = render._orthonormal_frame(normal)
     phi = (np.arange(n_phi) + 0.5) * (2 * np.pi / n_phi)
-    tang = np.cos(phi)[None, :, None] * t1[:, None, :] + np.sin(phi)[None, :, None] * t2[:, None, :]
-    h = (
-        cd[None, :, :, None, None] * normal[:, None, None, None, :]
-        + sd[None, :, :, None, None] * tang[:, None, None, :, :]
-    )  # (F, N, U, Phi, 3)
-    ho = np.einsum("fnupk,fk->fnup", h, view)
-    cos_i = (
-        2 * ho * np.einsum("fnupk,fk->fnup", h, normal)
-        - np.einsum("fk,fk->f", view, normal)[:, None, None, None]
-    )
-    above = (cos_i > 0) & (ho > 0)
-    return np.einsum("fnup,nu->fn", above.astype(float), w)
+    out = np.empty((len(normal), cd.shape[0]))
+    for lo in range(0, len(normal), chunk):
+        sl = slice(lo, lo + chunk)
+        n_, o_ = normal[sl], view[sl]
+        tang = (
+            np.cos(phi)[None, :, None] * t1[sl, None, :]
+            + np.sin(phi)[None, :, None] * t2[sl, None, :]
+        )  # (C, Phi, 3)
+        h = (
+            cd[None, :, :, None, None] * n_[:, None, None, None, :]
+            + sd[None, :, :, None, None] * tang[:, None, None, :, :]
+        )  # (C, N, U, Phi, 3)
+        ho = np.einsum("cnupk,ck->cnup", h, o_)
+        cos_i = (
+            2 * ho * np.einsum("cnupk,ck->cnup", h, n_)
+            - np.einsum("ck,ck->c", o_, n_)[:, None, None, None]
+        )
+        above = (cos_i > 0) & (ho > 0)
+        out[sl] = np.einsum("cnup,nu->cn", above.astype(float), w)
+    return out
 
 
 def radiance_ward_glossy_basis(
@@ -177,7 +190,7 @@ def radiance_ward_glossy_basis(
         chunk=chunk,
         occlusion=occlusion,
     )
-    frac = sampled_fraction(geometry, alpha, n_t, n_phi)  # (F, N)
+    frac = sampled_fraction(geometry, alpha, n_t, n_phi, chunk)  # (F, N)
     with np.errstate(divide="ignore", invalid="ignore"):
         sky_part = np.where(frac[..., None] > 0, sky_part / frac[..., None], 0.0)
     # the sun as a point source: f_sun cos(theta_s) E_sun (times the sunlit fraction)
