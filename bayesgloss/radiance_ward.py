@@ -99,16 +99,6 @@ def radiance_ward_sun_brdf(sun_direction, view_direction, normal, roughness) -> 
     return np.where(ok[:, None, :], f, 0.0)
 
 
-def _nodes(roughness, n_t: int, n_phi: int):
-    """cos delta, sin delta (N, U) and each node's weight (N, U) of the draw."""
-    alpha = np.atleast_1d(np.asarray(roughness, dtype=float))
-    if np.any(~np.isfinite(alpha)) or np.any(alpha <= 0):
-        raise ValueError(f"roughness must be finite and > 0, got {roughness}")
-    t, w = np.polynomial.laguerre.laggauss(n_t)
-    delta = np.arctan(alpha[:, None] * np.sqrt(t)[None, :])
-    return np.cos(delta), np.sin(delta), np.broadcast_to(w / n_phi, delta.shape)
-
-
 def sampled_fraction(
     geometry: render.ViewGeometry,
     roughness,
@@ -119,7 +109,7 @@ def sampled_fraction(
     """The share of Radiance's drawn reflected directions that lie above the
     surface, (F, N): 1 at normal view, less toward grazing views (``chunk``
     facets at a time, which bounds memory)."""
-    cd, sd, w = _nodes(roughness, n_t, n_phi)
+    _, cd, sd, w = render.ward_nodes(roughness, n_t, n_phi)
     normal = np.asarray(geometry.normal, dtype=float)
     view = np.asarray(geometry.view_direction, dtype=float)
     t1, t2 = render._orthonormal_frame(normal)
@@ -127,23 +117,16 @@ def sampled_fraction(
     out = np.empty((len(normal), cd.shape[0]))
     for lo in range(0, len(normal), chunk):
         sl = slice(lo, lo + chunk)
-        n_, o_ = normal[sl], view[sl]
-        tang = (
-            np.cos(phi)[None, :, None] * t1[sl, None, :]
-            + np.sin(phi)[None, :, None] * t2[sl, None, :]
-        )  # (C, Phi, 3)
-        h = (
-            cd[None, :, :, None, None] * n_[:, None, None, None, :]
-            + sd[None, :, :, None, None] * tang[:, None, None, :, :]
-        )  # (C, N, U, Phi, 3)
-        ho = np.einsum("cnupk,ck->cnup", h, o_)
-        cos_i = (
-            2 * ho * np.einsum("cnupk,ck->cnup", h, n_)
-            - np.einsum("ck,ck->c", o_, n_)[:, None, None, None]
+        ho, _, cos_i = render.half_vector_directions(
+            normal[sl], view[sl], t1[sl], t2[sl], cd, sd, phi
         )
-        above = (cos_i > 0) & (ho > 0)
-        out[sl] = np.einsum("cnup,nu->cn", above.astype(float), w)
+        out[sl] = np.einsum("cnup,nu->cn", _drawn(cos_i, ho), w)
     return out
+
+
+def _drawn(cos_i, ho, cos_o=None):
+    """1 where Radiance keeps a drawn direction (above the surface), else 0."""
+    return np.where((cos_i > 0) & (ho > 0), 1.0, 0.0)
 
 
 def radiance_ward_glossy_basis(
@@ -162,42 +145,30 @@ def radiance_ward_glossy_basis(
     reflection (module docstring), (F, N, T) [W sr^-1 m^-2].
 
     The sky and the ground as ``gaussamp`` draws them (each drawn direction
-    above the surface weighted 1, the sum divided by :func:`sampled_fraction`),
-    the sun by :func:`radiance_ward_sun_brdf`; the arriving radiance, the
+    above the surface weighted 1, the mean over those:
+    :func:`bayesgloss.render.half_vector_basis` with ``sky_mean``, whose
+    weights' sum is :func:`sampled_fraction`), the sun by
+    :func:`radiance_ward_sun_brdf`; the arriving radiance, the
     object's ground shadow (an occluder in ``geometry``) and ``occlusion`` as
     in :func:`bayesgloss.render.ward_glossy_basis`.
     """
-    cd, sd, w = _nodes(roughness, n_t, n_phi)
-    alpha = np.atleast_1d(np.asarray(roughness, dtype=float))
+    alpha, cd, sd, w = render.ward_nodes(roughness, n_t, n_phi)
 
-    def drawn(cos_i, ho, cos_o):
-        return np.where((cos_i > 0) & (ho > 0), 1.0, 0.0)
+    def sun_brdf(sun, o, n):
+        return radiance_ward_sun_brdf(sun, o, n, alpha)
 
-    def no_sun(sun, o, n):
-        return np.zeros((len(o), len(alpha), len(sun)))
-
-    sky_part = render.half_vector_basis(
+    return render.half_vector_basis(
         geometry,
         sky,
         cd,
         sd,
         w,
-        drawn,
-        no_sun,
+        _drawn,
+        sun_brdf,
         n_phi=n_phi,
         ground=ground,
         ground_reflectance=ground_reflectance,
         chunk=chunk,
         occlusion=occlusion,
+        sky_mean=True,
     )
-    frac = sampled_fraction(geometry, alpha, n_t, n_phi, chunk)  # (F, N)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sky_part = np.where(frac[..., None] > 0, sky_part / frac[..., None], 0.0)
-    # the sun as a point source: f_sun cos(theta_s) E_sun (times the sunlit fraction)
-    sun, e_sun = render._sun_terms(sky)
-    normal = np.asarray(geometry.normal, dtype=float)
-    cos_s = np.maximum(normal @ sun.T, 0.0)[:, None, :]
-    if occlusion is not None:
-        cos_s = cos_s * occlusion.sunlit_fraction[:, None, :]
-    f_sun = radiance_ward_sun_brdf(sun, geometry.view_direction, normal, alpha)
-    return sky_part + f_sun * cos_s * e_sun[None, None, :]
