@@ -28,7 +28,13 @@ import numpy as np
 from . import render
 from .convex_object import convex_object, facet_points
 
-__all__ = ["GROUND_SHADOWS", "DEFAULT_GROUND_SHADOW", "shadow_points", "averaged_bases"]
+__all__ = [
+    "GROUND_SHADOWS",
+    "DEFAULT_GROUND_SHADOW",
+    "shadow_points",
+    "facet_mean",
+    "averaged_bases",
+]
 
 #: ``estimate --ground-shadow``: ``"none"`` (the ground sunlit everywhere, as
 #: before), ``"convex"`` (this module).
@@ -85,19 +91,25 @@ def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE, whic
     return geometry, owner
 
 
-def averaged_bases(bases, owner, n_facets: int):
-    """:class:`~bayesgloss.illumination.IlluminationBases` of points averaged
-    over each facet's points (``owner``): (P, F, ...) from (P, M, ...)."""
+def facet_mean(x, owner, n_facets: int, axis: int = 0) -> np.ndarray:
+    """The mean over each facet's points (``owner``, from
+    :func:`shadow_points`) of ``x`` along ``axis`` (M points there, F after)."""
     counts = np.bincount(owner, minlength=n_facets).astype(float)
     if np.any(counts == 0):
         raise ValueError("every facet needs at least one point")
+    moved = np.moveaxis(np.asarray(x), axis, 0)
+    total = np.zeros((n_facets,) + moved.shape[1:])
+    np.add.at(total, owner, moved)
+    total /= counts.reshape((-1,) + (1,) * (moved.ndim - 1))
+    return np.moveaxis(total, 0, axis)
+
+
+def averaged_bases(bases, owner, n_facets: int):
+    """:class:`~bayesgloss.illumination.IlluminationBases` of points averaged
+    over each facet's points (``owner``): (P, F, ...) from (P, M, ...)."""
 
     def mean(x, axis):
-        moved = np.moveaxis(np.asarray(x), axis, 0)
-        total = np.zeros((n_facets,) + moved.shape[1:])
-        np.add.at(total, owner, moved)
-        total /= counts.reshape((-1,) + (1,) * (moved.ndim - 1))
-        return np.moveaxis(total, 0, axis)
+        return facet_mean(x, owner, n_facets, axis)
 
     fresnel = bases.fresnel
     if fresnel is not None:

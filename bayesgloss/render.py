@@ -1037,6 +1037,7 @@ def radiance_material_prediction(
     ground_reflectance: float = 0.2,
     resolution: float = 3.0,
     occlusion: Occlusion | None = None,
+    mirror_geometry: ViewGeometry | None = None,
 ) -> np.ndarray:
     """Radiance toward the camera of facets made of a Radiance material, (F, T).
 
@@ -1054,6 +1055,10 @@ def radiance_material_prediction(
         Radiance's material arguments [-]; only roughness 0 is modelled.
     occlusion : Occlusion, optional
         What a non-convex object's mesh hides from each facet; None: convex.
+    mirror_geometry : ViewGeometry, optional
+        The same facets for the mirror part (e.g. without the occluder, so
+        that the ground shadow darkens the diffuse part only); None:
+        ``geometry``.
     """
     if roughness != 0:
         raise ValueError(
@@ -1073,7 +1078,8 @@ def radiance_material_prediction(
         sky_part, sun_part = diffuse_components(geometry, sky, resolution=resolution, **common)
         out += mat.diffuse_ambient * sky_part + mat.diffuse_direct * sun_part
     if np.any(np.asarray(mat.specular) > 0):
-        out += mat.specular * mirror_radiance(geometry, sky, **common)
+        mirrored = geometry if mirror_geometry is None else mirror_geometry
+        out += mat.specular * mirror_radiance(mirrored, sky, **common)
     return out
 
 

@@ -57,9 +57,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from bayesgloss import bundle as bundle_io  # noqa: E402
-from bayesgloss import reflectance, render, sequences, sky  # noqa: E402
+from bayesgloss import render, sequences, sky  # noqa: E402
 from bayesgloss.ground_facing import GROUND_FACING_NZ  # noqa: E402
-from bayesgloss.object_shadow import shadow_points  # noqa: E402
+from bayesgloss.object_shadow import facet_mean, shadow_points  # noqa: E402
 from bayesgloss.radiance_ward import radiance_ward_glossy_basis  # noqa: E402
 
 #: Radiance's luminance of an RGB triple (its ``bright`` macro), [-].
@@ -120,17 +120,17 @@ def material_prediction(
     lum = float(RADIANCE_LUMINANCE @ colour)
     s, alpha, rho = config.specularity, config.roughness, config.ground_reflectance
     common = dict(ground="plane", ground_reflectance=rho)
-    if alpha == 0:  # Radiance's mirror materials, as render.radiance_material_prediction
-        sun, _ = render._sun_terms(day)
-        cos_incident = np.maximum(geometry.normal @ sun.T, 0.0)
-        mat = reflectance.radiance_material(
-            config.material, lum, s, 0.0, geometry.cos_view[:, None], cos_incident
+    if alpha == 0:  # Radiance's mirror materials
+        return render.radiance_material_prediction(
+            geometry,
+            day,
+            config.material,
+            lum,
+            s,
+            0.0,
+            ground_reflectance=rho,
+            mirror_geometry=glossy_geometry,
         )
-        sky_part, sun_part = render.diffuse_components(geometry, day, **common)
-        out = mat.diffuse_ambient * sky_part + mat.diffuse_direct * sun_part
-        if s > 0:
-            out = out + mat.specular * render.mirror_radiance(glossy_geometry, day, **common)
-        return out
     diffuse = render.diffuse_basis(geometry, day, **common)
     lobe = render.ward_glossy_basis if rough == "integrated" else radiance_ward_glossy_basis
     glossy = lobe(glossy_geometry, day, [alpha], **common)[:, 0, :]
@@ -151,12 +151,9 @@ def predictions(b, day, config, checked) -> dict:
     )
     points, owner = shadow_points(b.facets, b.camera_position, which=checked)
     unshadowed = dataclasses.replace(points, occluder=None)
-    counts = np.bincount(owner, minlength=len(idx)).astype(float)
 
     def per_facet(at_points):
-        total = np.zeros((len(idx), at_points.shape[1]))
-        np.add.at(total, owner, at_points)
-        return total / counts[:, None]
+        return facet_mean(at_points, owner, len(idx))
 
     return {
         "none": material_prediction(plain, day, config),
@@ -185,7 +182,7 @@ def spreads(y, model) -> dict:
 
 
 def check(path: Path, config: sequences.SequenceConfig) -> dict:
-    """One rendered sequence against both forward models."""
+    """One rendered sequence against each forward model of :func:`predictions`."""
     b = bundle_io.read_bundle(path)
     curves = bundle_io.facet_curves(b)
     y = np.where(curves.valid & b.sun_up[None, :], curves.luminance, np.nan)
