@@ -726,8 +726,9 @@ def _parser() -> argparse.ArgumentParser:
         "--ground-shadow",
         default=None,
         choices=GROUND_SHADOWS,
-        help="without an object_mesh: the ground sunlit everywhere (default 'none'), or "
-        "shadowed by the convex object the facets bound ('convex'; bayesgloss.object_shadow)",
+        help="without an object_mesh: the ground shadowed by the convex object the facets "
+        "bound ('convex', the default with per-frame illumination; bayesgloss.object_shadow), "
+        "or sunlit everywhere ('none', the only choice with the sky's brightness fixed)",
     )
     es.add_argument(
         "--clipped",

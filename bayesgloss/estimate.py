@@ -87,7 +87,7 @@ from .joint_estimate import (
     sky_model_summary,
 )
 from .model_error import model_error_sd, with_model_error
-from .object_shadow import DEFAULT_GROUND_SHADOW, check_ground_shadow
+from .object_shadow import check_ground_shadow, default_ground_shadow
 from .occluder_albedo import (
     DEFAULT_OCCLUDER_ALBEDO,
     check_occluder_albedo_mode,
@@ -297,7 +297,8 @@ def estimate_bundle(
         Without an ``object_mesh`` (per-frame illumination only): the
         ground sunlit everywhere, or the shadow of the convex object its
         facets bound (:mod:`bayesgloss.object_shadow`); default
-        :data:`bayesgloss.object_shadow.DEFAULT_GROUND_SHADOW`.
+        :func:`bayesgloss.object_shadow.default_ground_shadow` (``"convex"``
+        with per-frame illumination, ``"none"`` without).
     clipped : {"drop", "likelihood"}, optional
         Entries clipped at the top code: left out of the joint model, or
         lower bounds (:mod:`bayesgloss.sampling.censored`); default
@@ -337,8 +338,8 @@ def estimate_bundle(
     perez_families = sky_families.perez_families_for(illumination, perez_families)
     lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh, illumination)
     lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
-    shadow = check_ground_shadow(ground_shadow or DEFAULT_GROUND_SHADOW)
-    if shadow != DEFAULT_GROUND_SHADOW and not joint:
+    shadow = check_ground_shadow(ground_shadow or default_ground_shadow(joint))
+    if shadow != "none" and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")
     clipped = check_clipped(clipped or DEFAULT_CLIPPED)
     if joint:

@@ -124,6 +124,10 @@ def joint_inputs(
     kept as censored (``clipped``, :data:`CLIPPED`): (data, frames used (T,)
     of bool, sky model names)."""
     clipped = check_clipped(clipped)
+    # the kept facets as increasing indices, whether given as a mask or as indices
+    which = np.zeros(len(b.facets), dtype=bool)
+    which[keep] = True
+    keep = np.flatnonzero(which)
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
@@ -143,7 +147,7 @@ def joint_inputs(
     owner = None
     if check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane":
         # points over the kept facets only; the object is bounded by all of them
-        geometry, owner = shadow_points(b.facets, b.camera_position, which=keep)
+        geometry, owner = shadow_points(b.facets, b.camera_position, which=which)
     bases = il.illumination_bases(
         geometry,
         day,
@@ -157,7 +161,7 @@ def joint_inputs(
     if owner is None:
         bases = bases.take(keep, used)
     else:  # points over each kept facet, averaged
-        bases = averaged_bases(bases, owner, int(np.count_nonzero(keep))).take(frames=used)
+        bases = averaged_bases(bases, owner, len(keep)).take(frames=used)
     exposure = None
     if b.exposure is not None:
         exposure = b.exposure[used]

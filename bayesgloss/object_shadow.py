@@ -31,6 +31,7 @@ from .convex_object import convex_object, facet_points
 __all__ = [
     "GROUND_SHADOWS",
     "DEFAULT_GROUND_SHADOW",
+    "default_ground_shadow",
     "shadow_points",
     "facet_mean",
     "averaged_bases",
@@ -39,9 +40,21 @@ __all__ = [
 #: ``estimate --ground-shadow``: ``"none"`` (the ground sunlit everywhere, as
 #: before), ``"convex"`` (this module).
 GROUND_SHADOWS = ("none", "convex")
-DEFAULT_GROUND_SHADOW = "none"
+#: The default where per-frame illumination is inferred (the joint model):
+#: the convex object's shadow, since holdout 16 (studies/README.md, "Holdout
+#: 16 and Mitsuba holdout 6"). A model with the sky's brightness fixed has none.
+DEFAULT_GROUND_SHADOW = "convex"
 #: Grid cells a side of each facet's bounding rectangle (:func:`facet_points`).
 POINTS_PER_SIDE = 4
+
+
+def default_ground_shadow(joint: bool) -> str:
+    """The ground shadow ``estimate`` fits without ``--ground-shadow``:
+    :data:`DEFAULT_GROUND_SHADOW` for the joint model (per-frame
+    illumination), ``"none"`` otherwise (the only one that model has). A
+    bundle with an ``object_mesh`` casts its shadow from the mesh whatever
+    this says (:mod:`bayesgloss.visibility`)."""
+    return DEFAULT_GROUND_SHADOW if joint else "none"
 
 
 def check_ground_shadow(mode: str) -> str:

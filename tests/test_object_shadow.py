@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 
 from bayesgloss import fresnel, geometry, illumination, render, sky
-from bayesgloss.object_shadow import averaged_bases, check_ground_shadow, shadow_points
+from bayesgloss.object_shadow import (
+    averaged_bases,
+    check_ground_shadow,
+    default_ground_shadow,
+    shadow_points,
+)
 
 CAMERA = np.array([6.0, 7.0, 5.0])
 
@@ -159,6 +164,11 @@ def test_ground_shadow_needs_per_frame_illumination(tmp_path):
         estimate.estimate_bundle(path, per_frame=False, ground_shadow="convex")
     with pytest.raises(ValueError, match="unknown ground shadow 'mesh'"):
         estimate.estimate_bundle(path, ground_shadow="mesh")
+    # the default: the shadow where per-frame illumination is inferred (holdout
+    # 16's rule), none where the sky's brightness is fixed, so that model still
+    # runs without the option
+    assert default_ground_shadow(True) == "convex"
+    assert default_ground_shadow(False) == "none"
 
 
 def test_joint_inputs_cast_the_shadow_only_where_asked(tmp_path):
