@@ -113,7 +113,8 @@ def joint_inputs(
     clipped=DEFAULT_CLIPPED,
 ):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
-    the usable facets ``keep`` and the frames any of them sees with the sun
+    the usable facets ``keep`` (a mask, or indices: taken in increasing
+    order either way) and the frames any of them sees with the sun
     up, with the Fresnel model ``fresnel`` (:data:`bayesgloss.fresnel.FRESNEL_MODELS`),
     the glossy lobe's family ``lobe_family`` (:data:`bayesgloss.lobes.LOBE_FAMILIES`)
     and, for a bundle with an ``object_mesh``, its faces' albedo
@@ -124,7 +125,6 @@ def joint_inputs(
     kept as censored (``clipped``, :data:`CLIPPED`): (data, frames used (T,)
     of bool, sky model names)."""
     clipped = check_clipped(clipped)
-    # the kept facets as increasing indices, whether given as a mask or as indices
     which = np.zeros(len(b.facets), dtype=bool)
     which[keep] = True
     keep = np.flatnonzero(which)

@@ -1,9 +1,11 @@
 """The object's own shadow on the ground, in the bases of a bundle without a mesh.
 
-``estimate --ground-shadow convex``. A convex object standing alone (a bundle
-without ``object_mesh``) shadows the ground at its foot, and a glossy facet
-whose mirror direction points down sees that shadow when the sun is behind
-it (:mod:`bayesgloss.convex_object`). The forward model has the shadow
+``estimate --ground-shadow convex``, the joint model's default since stop 49
+(:func:`default_ground_shadow`; holdout 16's rule, studies/README.md). A
+convex object standing alone (a bundle without ``object_mesh``) shadows the
+ground at its foot, and a glossy facet whose mirror direction points down
+sees that shadow when the sun is behind it
+(:mod:`bayesgloss.convex_object`). The forward model has the shadow
 (:func:`bayesgloss.render.ground_shadow`, a convex occluder's) but a bundle
 gives no occluder; here it is the object that the seen facets and their
 mirror images bound (:func:`bayesgloss.convex_object.convex_object`).

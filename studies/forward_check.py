@@ -13,9 +13,10 @@ facet the same ratio in every frame (the camera's luminance unit, 179 for
 Radiance's lm/W); what the ratio does over the frames is what a fit must
 put into gloss, the sky's latent brightnesses, or its residuals.
 
-Forward models checked: the default's (facet centres, the ground
-sunlit everywhere, ``estimate --ground-shadow none``) and the convex
-object's shadow on the ground (``--ground-shadow convex``: the object the
+Forward models checked: the default's until stop 49 (facet centres, the
+ground sunlit everywhere, ``estimate --ground-shadow none``) and the convex
+object's shadow on the ground (``--ground-shadow convex``, the default
+since stop 49: the object the
 facets bound shadows the ground at its foot, bases averaged over points of
 each facet, :mod:`bayesgloss.object_shadow`), that shadow in the diffuse
 part only, and the shadow with a rough material's lobe by Radiance's own
@@ -140,8 +141,9 @@ def material_prediction(
 
 def predictions(b, day, config, checked) -> dict:
     """The forward model's prediction of the ``checked`` facets, (F, T):
-    ``none`` (facet centres, no shadow: the default), ``convex`` (points
-    over each facet, the convex object's ground shadow in both parts) and
+    ``none`` (facet centres, no shadow: the default until stop 49),
+    ``convex`` (points over each facet, the convex object's ground shadow in
+    both parts: the default since) and
     ``convex-diffuse`` (the shadow in the diffuse part only), and
     ``convex-radiance`` (``convex`` with Radiance's own rough-specular rules)."""
     geometry = b.view_geometry()
