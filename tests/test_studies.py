@@ -241,3 +241,77 @@ def test_validation_family_table_reads_the_default_method():
         }
     ]
     assert validate.family_table(older)["gensky_named_right"] == {"right": 1, "sequences": 1}
+
+
+def _rule_score(bundle, truth, sun, default, candidate):
+    """A score of two methods, each (median, lo, hi, seconds, flags)."""
+
+    def entry(m, lo, hi, s, flags=()):
+        return {
+            "median": m,
+            "hdi90": [lo, hi],
+            "q05": lo,
+            "q95": hi,
+            "seconds": s,
+            "flags": list(flags),
+        }
+
+    return {
+        "bundle": bundle,
+        "truth": truth,
+        "direct_sun": sun,
+        "facets": 10,
+        "category": "perez-clear",
+        "class": "rough-metal",
+        "d": entry(*default),
+        "c": entry(*candidate),
+    }
+
+
+def test_holdout_rule_pools_sets_and_refuses_a_set_much_worse():
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    hr = importlib.import_module("holdout_rule")
+    one = [
+        _rule_score("vs00", 0.5, True, (0.60, 0.55, 0.65, 100), (0.50, 0.40, 0.60, 110)),
+        _rule_score("vs01", 0.3, True, (0.30, 0.10, 0.50, 100), (0.31, 0.10, 0.50, 110)),
+        # sunless: the default is confidently wrong, the candidate flagged and wide
+        _rule_score(
+            "vs02",
+            0.5,
+            False,
+            (0.90, 0.85, 0.95, 100),
+            (0.20, 0.0, 0.8, 110, ["gloss-not-identifiable"]),
+        ),
+    ]
+    out = hr.rule({"one": one}, "d", "c")
+    d, c = out["pooled"]["d"], out["pooled"]["c"]
+    assert d["mae"] == pytest.approx(0.05) and c["mae"] == pytest.approx(0.005)
+    assert (d["held"], c["held"]) == (1, 2)
+    assert d["confident_misses"] == ["vs00"] and c["confident_misses"] == []
+    assert (d["overcast_ok"], c["overcast_ok"]) == (0, 1)
+    assert out["speed_ratio"] == pytest.approx(1.1) and out["met"]
+    # a second set where the candidate is 0.02 worse: pooled MAE still lower, (a) not met
+    two = [_rule_score("ms00", 0.5, True, (0.50, 0.4, 0.6, 100), (0.52, 0.4, 0.6, 110))]
+    out = hr.rule({"one": one, "two": two}, "d", "c")
+    assert out["pooled"]["c"]["mae"] < out["pooled"]["d"]["mae"]
+    assert out["sets_more_than_tolerance_worse"] == ["two"]
+    assert not out["conditions"]["a"] and not out["met"]
+    # too slow: 1.3 times the default's median seconds
+    slow = [dict(s, c=dict(s["c"], seconds=130)) for s in one]
+    assert not hr.rule({"one": slow}, "d", "c")["conditions"]["e"]
+
+
+def test_holdout_rule_reads_holdout16_as_stop_49_decided():
+    # stop 49's decision on the committed scores: sun-lit MAE 0.067 -> 0.052,
+    # held 16/18 -> 17/18, one confident miss each, overcast 4/6 -> 5/6, 1.09x
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    hr = importlib.import_module("holdout_rule")
+    out = hr.main(["--set", "validation_holdout16", "--candidate", "ground-shadow"])
+    d, c = out["pooled"]["perez"], out["pooled"]["ground-shadow"]
+    assert round(d["mae"], 3) == 0.067 and round(c["mae"], 3) == 0.052
+    assert (d["held"], c["held"], d["sun_lit"]) == (16, 17, 18)
+    assert d["confident_misses"] == c["confident_misses"] == ["vs01"]
+    assert (d["overcast_ok"], c["overcast_ok"]) == (4, 5)
+    assert round(out["speed_ratio"], 2) == 1.09 and out["met"]

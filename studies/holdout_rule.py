@@ -1,0 +1,240 @@
+"""Apply a holdout's rule: does a candidate method beat the default on sets it never saw?
+
+Every change to the default since stop 40 was judged by a rule written in
+``studies/README.md`` before its sets were drawn. The rule's conditions
+are always the same five, over the sets' sun-lit sequences pooled (the
+sunless ones for (d), all for (e)):
+
+(a) the candidate's object MAE is lower than the default's, and on no set
+    more than ``--set-tolerance`` (0.01) higher;
+(b) its reported 90 % interval holds the truth at least as often;
+(c) it makes no more confident misses (the truth outside a reported
+    interval narrower than 0.5);
+(d) it passes the overcast rule (within 0.05 of the truth, or flagged
+    ``gloss-not-identifiable`` with an interval wider than 0.5) on at
+    least as many sunless sequences;
+(e) its median seconds a sequence over all sequences are at most
+    ``--speed-limit`` (1.25) times the default's.
+
+A rule's own condition (f), a named test passing on the candidate, is run
+by hand. Reported beside the rule, as every rule asks: per set, per
+material class, per sky type, per facet count (1-3, more) and
+``not-converged``.
+
+A sequence counts only where both methods scored it, and the script says
+how many each set has of how many bundles, so a rule is never read on a
+set scored part way without saying so.
+
+Usage::
+
+    python studies/holdout_rule.py --set validation_holdout16 \\
+        --default perez --candidate ground-shadow [--cached] [--json FILE]
+
+Scores come from the set's committed results (``studies/results/<set>.json``,
+:data:`validate_radiance.SETS`) or, with ``--cached``, from its score cache
+(``studies/out/<set>/scores/``, where ``validate_radiance.py --merge`` put
+the candidate's). ``--set`` may be repeated: the rule pools the sets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+from validate_radiance import SETS, reported_interval  # noqa: E402
+
+#: The widest reported interval a miss may have and still count as confident.
+CONFIDENT_WIDTH = 0.5
+#: The overcast rule: within this of the truth, or flagged with an interval wider than
+#: :data:`CONFIDENT_WIDTH`.
+OVERCAST_WITHIN = 0.05
+
+
+def holds(entry: dict, truth: float) -> bool:
+    """Whether the reported interval of a method's score holds the truth."""
+    lo, hi = reported_interval(entry)
+    return lo <= truth <= hi
+
+
+def confident_miss(entry: dict, truth: float) -> bool:
+    """The truth outside a reported interval narrower than :data:`CONFIDENT_WIDTH`."""
+    return not holds(entry, truth) and np.ptp(reported_interval(entry)) < CONFIDENT_WIDTH
+
+
+def overcast_ok(entry: dict, truth: float) -> bool:
+    """The overcast rule on one sunless sequence."""
+    if abs(entry["median"] - truth) <= OVERCAST_WITHIN:
+        return True
+    flagged = "gloss-not-identifiable" in entry.get("flags", [])
+    return flagged and np.ptp(reported_interval(entry)) > CONFIDENT_WIDTH
+
+
+def facet_count(score: dict) -> str:
+    """The facet-count group a score is reported in."""
+    return "1-3 facets" if score["facets"] <= 3 else "more than 3"
+
+
+def method_figures(scores: list[dict], method: str) -> dict:
+    """A method's figures on ``scores``: sun-lit MAE, held, confident misses
+    (the bundles' first four characters), overcast rule, median seconds and
+    ``not-converged``."""
+    sun = [s for s in scores if s["direct_sun"]]
+    sunless = [s for s in scores if not s["direct_sun"]]
+    err = [abs(s[method]["median"] - s["truth"]) for s in sun]
+    return {
+        "sun_lit": len(sun),
+        "mae": float(np.mean(err)) if err else None,
+        "held": sum(holds(s[method], s["truth"]) for s in sun),
+        "confident_misses": [s["bundle"][:4] for s in sun if confident_miss(s[method], s["truth"])],
+        "sunless": len(sunless),
+        "overcast_ok": sum(overcast_ok(s[method], s["truth"]) for s in sunless),
+        "median_seconds": float(np.median([s[method]["seconds"] for s in scores]))
+        if scores
+        else None,
+        "not_converged": sum("not-converged" in s[method].get("flags", []) for s in scores),
+    }
+
+
+def rule(
+    sets: dict[str, list[dict]],
+    default: str,
+    candidate: str,
+    *,
+    set_tolerance: float = 0.01,
+    speed_limit: float = 1.25,
+) -> dict:
+    """Conditions (a)-(e) of the module docstring, pooled over ``sets`` (name:
+    scores holding both methods), with each set's figures beside them."""
+    pooled = [s for scores in sets.values() for s in scores]
+    d, c = method_figures(pooled, default), method_figures(pooled, candidate)
+    per_set = {
+        name: {m: method_figures(scores, m) for m in (default, candidate)}
+        for name, scores in sets.items()
+    }
+    worse = [
+        name
+        for name, fig in per_set.items()
+        if fig[default]["mae"] is not None
+        and fig[candidate]["mae"] > fig[default]["mae"] + set_tolerance
+    ]
+    ratio = c["median_seconds"] / d["median_seconds"] if d["median_seconds"] else None
+    conditions = {
+        "a": d["mae"] is not None and c["mae"] < d["mae"] and not worse,
+        "b": c["held"] >= d["held"],
+        "c": len(c["confident_misses"]) <= len(d["confident_misses"]),
+        "d": c["overcast_ok"] >= d["overcast_ok"],
+        "e": ratio is not None and ratio <= speed_limit,
+    }
+    return {
+        "default": default,
+        "candidate": candidate,
+        "pooled": {default: d, candidate: c},
+        "speed_ratio": ratio,
+        "sets_more_than_tolerance_worse": worse,
+        "conditions": conditions,
+        "met": all(conditions.values()),
+        "per_set": per_set,
+        "beside": {
+            key: {
+                group: {m: method_figures(rows, m) for m in (default, candidate)}
+                for group, rows in _groups(pooled, by).items()
+            }
+            for key, by in (
+                ("class", lambda s: s.get("class") or "none"),
+                ("sky type", lambda s: s["category"]),
+                ("facet count", facet_count),
+            )
+        },
+    }
+
+
+def _groups(scores, by) -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    for s in scores:
+        out.setdefault(by(s), []).append(s)
+    return dict(sorted(out.items()))
+
+
+def load_set(name: str, cached: bool, methods: tuple[str, str]) -> tuple[list[dict], int]:
+    """A set's scores holding both ``methods``, and how many bundles the set has."""
+    if cached:
+        files = sorted((HERE / "out" / name / "scores").glob("*.json"))
+        scores = [json.loads(f.read_text()) for f in files]
+        bundles = HERE / "out" / name / "bundles"
+        n = len(list(bundles.iterdir())) if bundles.is_dir() else len(scores)
+    else:
+        path = HERE / "results" / f"{SETS[name]}.json"
+        if not path.exists():
+            raise SystemExit(f"holdout_rule: {path}: no committed results for set {name!r}")
+        scores = json.loads(path.read_text())["sequences"]
+        n = len(scores)
+    both = [s for s in scores if all(m in s for m in methods) and s.get("truth") is not None]
+    return both, n
+
+
+def _line(name: str, fig: dict) -> str:
+    mae = "-" if fig["mae"] is None else f"{fig['mae']:.3f}"
+    return (
+        f"  {name:<16} MAE {mae}  held {fig['held']}/{fig['sun_lit']}"
+        f"  confident misses {len(fig['confident_misses'])} {fig['confident_misses']}"
+        f"  overcast {fig['overcast_ok']}/{fig['sunless']}"
+        f"  median s {fig['median_seconds']:.0f}  not-converged {fig['not_converged']}"
+    )
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--set", action="append", required=True, choices=tuple(SETS), dest="sets")
+    ap.add_argument("--default", default="perez", help="the default's method name in the scores")
+    ap.add_argument("--candidate", required=True, help="the candidate's method name")
+    ap.add_argument("--cached", action="store_true", help="read the sets' score caches")
+    ap.add_argument("--set-tolerance", type=float, default=0.01)
+    ap.add_argument("--speed-limit", type=float, default=1.25)
+    ap.add_argument("--json", help="also write the figures to this file")
+    args = ap.parse_args(argv)
+    methods = (args.default, args.candidate)
+    sets, sizes = {}, {}
+    for name in args.sets:
+        sets[name], sizes[name] = load_set(name, args.cached, methods)
+    out = rule(
+        sets,
+        *methods,
+        set_tolerance=args.set_tolerance,
+        speed_limit=args.speed_limit,
+    )
+    out["scored_by_both"] = {name: [len(sets[name]), sizes[name]] for name in sets}
+    for name in sets:
+        print(f"{name}: {len(sets[name])} of {sizes[name]} bundles scored by both")
+        for m in methods:
+            print(_line(m, out["per_set"][name][m]))
+    print("pooled:")
+    for m in methods:
+        print(_line(m, out["pooled"][m]))
+    print(f"  speed ratio {out['speed_ratio']:.2f}")
+    for key, value in out["conditions"].items():
+        print(f"  ({key}) {'met' if value else 'NOT met'}")
+    if out["sets_more_than_tolerance_worse"]:
+        worse = out["sets_more_than_tolerance_worse"]
+        print(f"  (a): more than {args.set_tolerance} worse on {worse}")
+    print("rule met" if out["met"] else "rule NOT met")
+    for key, groups in out["beside"].items():
+        print(f"by {key}:")
+        for group, figs in groups.items():
+            print(f" {group}")
+            for m in methods:
+                print(_line(m, figs[m]))
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    return out
+
+
+if __name__ == "__main__":
+    main()
