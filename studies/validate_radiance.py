@@ -69,6 +69,7 @@ SETS = {
     "validation_holdout15": "validation_holdout15",
     "validation_holdout16": "validation_holdout16",
     "validation_holdout17": "validation_holdout17",
+    "validation_holdout18": "validation_holdout18",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -77,6 +78,7 @@ SETS = {
     "mitsuba_holdout5": "validation_mitsuba_holdout5",
     "mitsuba_holdout6": "validation_mitsuba_holdout6",
     "mitsuba_holdout7": "validation_mitsuba_holdout7",
+    "mitsuba_holdout8": "validation_mitsuba_holdout8",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -86,7 +88,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
-    "radiance-ward",
+    "radiance-ward", "within-10",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -108,6 +110,9 @@ SCORED_ELSEWHERE = {
     # holdout 17's candidate, branch radiance-ward: the ward lobe family by
     # Radiance's own rough-specular rules (bayesgloss.radiance_ward)
     "radiance-ward": "perez",
+    # holdout 18's candidate, branch tied-within-10: where PSIS-LOO is
+    # unreliable, the sky families within 10 nats of the best share the weight
+    "within-10": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -157,6 +162,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
     "mitsuba_holdout6": ("baseline", "perez", "ground-shadow"),
     "mitsuba_holdout7": ("baseline", "perez"),  # and radiance-ward, merged
+    "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, merged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -171,6 +177,7 @@ DEFAULT_METHODS = {
     "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
     "validation_holdout16": ("baseline", "perez", "ground-shadow"),
     "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
+    "validation_holdout18": ("baseline", "perez"),  # and within-10, merged
 }
 
 
