@@ -49,32 +49,9 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
-from validate_radiance import SETS, reported_interval  # noqa: E402
-
-#: The widest reported interval a miss may have and still count as confident.
-CONFIDENT_WIDTH = 0.5
-#: The overcast rule: within this of the truth, or flagged with an interval wider than
-#: :data:`CONFIDENT_WIDTH`.
-OVERCAST_WITHIN = 0.05
-
-
-def holds(entry: dict, truth: float) -> bool:
-    """Whether the reported interval of a method's score holds the truth."""
-    lo, hi = reported_interval(entry)
-    return lo <= truth <= hi
-
-
-def confident_miss(entry: dict, truth: float) -> bool:
-    """The truth outside a reported interval narrower than :data:`CONFIDENT_WIDTH`."""
-    return not holds(entry, truth) and np.ptp(reported_interval(entry)) < CONFIDENT_WIDTH
-
-
-def overcast_ok(entry: dict, truth: float) -> bool:
-    """The overcast rule on one sunless sequence."""
-    if abs(entry["median"] - truth) <= OVERCAST_WITHIN:
-        return True
-    flagged = "gloss-not-identifiable" in entry.get("flags", [])
-    return flagged and np.ptp(reported_interval(entry)) > CONFIDENT_WIDTH
+# the same tests of a score as validate_radiance's tables
+from validate_radiance import SETS, confident_miss, overcast_ok  # noqa: E402
+from validate_radiance import _holds as holds  # noqa: E402
 
 
 def facet_count(score: dict) -> str:
@@ -169,7 +146,11 @@ def load_set(name: str, cached: bool, methods: tuple[str, str]) -> tuple[list[di
         files = sorted((HERE / "out" / name / "scores").glob("*.json"))
         scores = [json.loads(f.read_text()) for f in files]
         bundles = HERE / "out" / name / "bundles"
-        n = len(list(bundles.iterdir())) if bundles.is_dir() else len(scores)
+        n = (
+            sum((p / "sequence.json").exists() for p in bundles.iterdir())
+            if bundles.is_dir()
+            else len(scores)
+        )
     else:
         path = HERE / "results" / f"{SETS[name]}.json"
         if not path.exists():

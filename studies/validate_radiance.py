@@ -470,6 +470,19 @@ def _holds(entry: dict, truth: float) -> bool:
     return lo <= truth <= hi
 
 
+def confident_miss(entry: dict, truth: float) -> bool:
+    """The truth outside a reported interval narrower than 0.5."""
+    return not _holds(entry, truth) and np.ptp(reported_interval(entry)) < 0.5
+
+
+def overcast_ok(entry: dict, truth: float) -> bool:
+    """The overcast rule on one sunless sequence: within 0.05 of the truth, or
+    flagged ``gloss-not-identifiable`` with a reported interval wider than 0.5."""
+    if abs(entry["median"] - truth) <= 0.05:
+        return True
+    return "gloss-not-identifiable" in entry["flags"] and np.ptp(reported_interval(entry)) > 0.5
+
+
 def methods_run(scores: list[dict]) -> list[str]:
     """The methods of :data:`METHODS` that any of ``scores`` holds, in that order."""
     return [m for m in METHODS if any(m in s for s in scores)]
@@ -511,25 +524,12 @@ def table(scores: list[dict]) -> dict:
                         e[f"coverage90_{name}_direct_sun"] = float(np.mean(held))
                 # confident misses: the truth outside a reported interval narrower than 0.5
                 e["confident_misses_direct_sun"] = [
-                    s["bundle"][:4]
-                    for s in sun
-                    if m in s
-                    and not _holds(s[m], s["truth"])
-                    and np.ptp(reported_interval(s[m])) < 0.5
+                    s["bundle"][:4] for s in sun if m in s and confident_miss(s[m], s["truth"])
                 ]
                 tails = [s[m]["q05"] <= s["truth"] <= s[m]["q95"] for s in sun if m in s]
                 e["coverage90_equal_tailed_direct_sun"] = float(np.mean(tails)) if tails else None
                 over = [s for s in rows if not s["direct_sun"] and m in s]
-                e["overcast_ok"] = int(
-                    sum(
-                        abs(s[m]["median"] - s["truth"]) <= 0.05
-                        or (
-                            "gloss-not-identifiable" in s[m]["flags"]
-                            and np.ptp(reported_interval(s[m])) > 0.5
-                        )
-                        for s in over
-                    )
-                )
+                e["overcast_ok"] = int(sum(overcast_ok(s[m], s["truth"]) for s in over))
                 e["overcast"] = len(over)
                 e["not_converged"] = sum("not-converged" in s[m]["flags"] for s in rows if m in s)
             out.setdefault(cat, {})[m] = e
