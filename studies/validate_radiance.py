@@ -421,6 +421,38 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
     return out
 
 
+#: Where a candidate scored on its own commit (as ``perez``) can answer
+#: otherwise than the default: a test of the default's ``perez`` entry of the
+#: same bundle. Where it is false the candidate runs the default's fits
+#: exactly (same seeds, same code on that path), so its answer is copied
+#: instead of fitted again (``--candidate``, :func:`_cached`):
+#: ``within-10`` changes only the weights that ``equal_when_unreliable``
+#: gives where its guard acts (flagged ``sky-family-not-identifiable``);
+#: ``schlick-half`` only the ``ggx-schlick`` fit of the lobe stack, which
+#: runs where the lobe families were stacked (a ``ggx-schlick`` entry).
+CANDIDATE_ACTS = {
+    "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
+    "schlick-half": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
+}
+
+
+def _same_as_default(path: Path, candidate: tuple | None) -> dict | None:
+    """The default's ``perez`` entry of this bundle, marked ``same_fit_as``,
+    where ``candidate`` (its name, the default's score folder) cannot change
+    it (:data:`CANDIDATE_ACTS`); None where it can, or the default has not
+    scored the bundle yet."""
+    if candidate is None:
+        return None
+    name, folder = candidate
+    file = Path(folder) / f"{path.name}.json"
+    if not file.exists():
+        return None
+    entry = json.loads(file.read_text()).get("perez")
+    if entry is None or CANDIDATE_ACTS[name](entry):
+        return None
+    return {**entry, "same_fit_as": "default"}
+
+
 def _cached(
     path: Path,
     max_sweeps: int,
@@ -428,11 +460,14 @@ def _cached(
     scores: Path | None = None,
     committed: dict | None = None,
     methods=METHODS,
+    candidate: tuple | None = None,
 ) -> dict:
     """The scores of one bundle, from the cache in ``scores`` where it has
     them, else from ``committed`` (the set's committed results, by bundle
     name: a fresh checkout recomputes only what they lack); the methods in
-    ``redo`` (and any the cache lacks) computed afresh."""
+    ``redo`` (and any the cache lacks) computed afresh. ``candidate``
+    (name, the default's score folder): ``perez`` copied from the default
+    where the candidate cannot change it (:func:`_same_as_default`)."""
     scores = scores or path.parent.parent / "scores"
     scores.mkdir(parents=True, exist_ok=True)
     file = scores / f"{path.name}.json"
@@ -441,6 +476,11 @@ def _cached(
     else:
         out = dict((committed or {}).get(path.name, {}))
     todo = [m for m in methods if m in redo or m not in out]
+    same = _same_as_default(path, candidate) if "perez" in todo else None
+    if same is not None:
+        out["perez"] = same
+        todo.remove("perez")
+        file.write_text(json.dumps(out, indent=1))
     if todo:
         out = score_bundle(str(path), max_sweeps, todo, out)
         file.write_text(json.dumps(out, indent=1))
@@ -742,6 +782,13 @@ def main(argv=None) -> None:
         help="copy a method of SCORED_ELSEWHERE from another worktree's score cache, and stop",
     )
     ap.add_argument(
+        "--candidate",
+        nargs=2,
+        metavar=("NAME", "FOLDER"),
+        help="score a candidate of CANDIDATE_ACTS on its own commit (as 'perez'), copying "
+        "the default's answer from its score FOLDER where the candidate cannot change it",
+    )
+    ap.add_argument(
         "--summary-only",
         action="store_true",
         help="fit nothing: rebuild the tables and figures from the set's committed scores "
@@ -769,6 +816,16 @@ def main(argv=None) -> None:
             f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'"
         )
         return
+    candidate = None
+    if args.candidate:
+        name, folder = args.candidate
+        if name not in CANDIDATE_ACTS:
+            raise SystemExit(
+                f"validate_radiance: --candidate: {name!r} is not one of {sorted(CANDIDATE_ACTS)}"
+            )
+        if not Path(folder).is_dir():
+            raise SystemExit(f"validate_radiance: --candidate: {folder}: no such score folder")
+        candidate = (name, str(Path(folder).resolve()))
     fitting = not (args.summary_only or args.summary_cached)
     elsewhere = set(methods) & set(SCORED_ELSEWHERE) if fitting else set()
     if elsewhere:
@@ -804,6 +861,7 @@ def main(argv=None) -> None:
                     [None] * n,
                     [committed] * n,
                     [methods] * n,
+                    [candidate] * n,
                 )
             )
         summary = write_summary(scores, args.set, args.max_sweeps)
