@@ -93,16 +93,15 @@ def fit(path: Path, sky: str, jobs: int = 1) -> dict:
         "within_model": res.summary["object"].get("gamma_within_model"),
         "seconds": time.perf_counter() - t0,
     }
-    for v in ("fresnel_strength", "log_normal_albedo"):
-        if v in post:
-            out[v] = float(np.median(post[v].values))
+    if "fresnel_strength" in post:  # the Fresnel strength k, 1 for a real coating
+        out["fresnel_strength"] = float(np.median(post["fresnel_strength"].values))
     return out
 
 
 def table(labels) -> None:
     runs = {lab: json.loads((OUT / f"{lab}.json").read_text()) for lab in labels}
     names = sorted(set().union(*runs.values()))
-    head = " | ".join(f"{lab}: gamma [90 %], k, A" for lab in labels)
+    head = " | ".join(f"{lab}: gamma [90 %], k" for lab in labels)
     print(f"| sequence | truth | {head} |")
     errors = {lab: [] for lab in labels}
     for n in names:
@@ -115,10 +114,9 @@ def table(labels) -> None:
             truth = r["truth"]
             g = r["gamma"]
             errors[lab].append(abs(g["median"] - truth))
-            a = np.exp(r["log_normal_albedo"]) if "log_normal_albedo" in r else float("nan")
             cells.append(
                 f"{g['median']:.3f} [{g['q05']:.2f}, {g['q95']:.2f}], "
-                f"{r.get('fresnel_strength', float('nan')):.2f}, {a:.2f}"
+                f"{r.get('fresnel_strength', float('nan')):.2f}"
             )
         print(f"| {n} | {truth:.3f} | " + " | ".join(cells) + " |")
     for lab in labels:

@@ -427,12 +427,11 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
 #: exactly (same seeds, same code on that path), so its answer is copied
 #: instead of fitted again (``--candidate``, :func:`_cached`):
 #: ``within-10`` changes only the weights that ``equal_when_unreliable``
-#: gives where its guard acts (flagged ``sky-family-not-identifiable``);
-#: ``schlick-half`` only the ``ggx-schlick`` fit of the lobe stack, which
-#: runs where the lobe families were stacked (a ``ggx-schlick`` entry).
+#: gives where its guard acts (flagged ``sky-family-not-identifiable``).
+#: A change to one lobe family's fit would act only where the lobe
+#: families were stacked (its entry in ``lobe_families``).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
-    "schlick-half": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
 }
 
 
