@@ -194,32 +194,29 @@ def test_validation_calibration_randomises_the_pit_on_an_atom(tmp_path):
 
 def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(tmp_path):
     # --candidate NAME FOLDER: where the default's score of the bundle shows
-    # the candidate's change cannot act (within-10: no equal-weights guard;
-    # schlick-half: no ggx-schlick fit), its answer is the default's, marked;
-    # where it can act, or the default has not scored the bundle, it is fitted
+    # the candidate's change cannot act (within-10: the equal-weights guard
+    # did not act), its answer is the default's, marked; where it can act,
+    # or the default has not scored the bundle, it is fitted
     if str(STUDIES) not in sys.path:
         sys.path.insert(0, str(STUDIES))
     validate = importlib.import_module("validate_radiance")
     default = tmp_path / "default"
     default.mkdir()
     entries = {
-        "tied": {"median": 0.4, "flags": ["sky-family-not-identifiable"]},
-        "stacked": {"median": 0.5, "flags": [], "lobe_families": {"phong": {}, "ggx-schlick": {}}},
-        "phong-only": {"median": 0.6, "flags": ["lobe-family-not-stacked"]},
+        "tied": {"median": 0.4, "flags": ["sky-family-not-identifiable", "not-converged"]},
+        "stacked": {"median": 0.5, "flags": ["loo-unreliable"]},
+        "plain": {"median": 0.6, "flags": []},
     }
     for name, entry in entries.items():
         (default / f"{name}.json").write_text(json.dumps({"perez": entry}))
 
-    def same(name, candidate):
-        return validate._same_as_default(tmp_path / "bundles" / name, (candidate, default))
+    def same(name):
+        return validate._same_as_default(tmp_path / "bundles" / name, ("within-10", default))
 
-    assert same("tied", "within-10") is None
-    assert same("stacked", "within-10") == {**entries["stacked"], "same_fit_as": "default"}
-    assert same("phong-only", "within-10")["median"] == 0.6
-    assert same("stacked", "schlick-half") is None
-    assert same("tied", "schlick-half")["median"] == 0.4
-    assert same("phong-only", "schlick-half")["same_fit_as"] == "default"
-    assert same("not-scored-yet", "within-10") is None
+    assert same("tied") is None
+    assert same("stacked") == {**entries["stacked"], "same_fit_as": "default"}
+    assert same("plain")["median"] == 0.6
+    assert same("not-scored-yet") is None
     assert validate._same_as_default(tmp_path / "tied", None) is None
 
 
