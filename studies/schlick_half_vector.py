@@ -15,8 +15,16 @@ most, with the code on ``PYTHONPATH`` (run it once per commit, ``--label``
 naming it):
 
     PYTHONPATH=. python studies/schlick_half_vector.py --label view-rise
-    PYTHONPATH=/work/shv python studies/schlick_half_vector.py --label half-vector
-    python studies/schlick_half_vector.py --table
+    PYTHONPATH=<worktree of schlick-half-vector> python studies/schlick_half_vector.py \
+        --label half-vector
+    PYTHONPATH=<worktree of schlick-in-lobe> python studies/schlick_half_vector.py \
+        --label rise-inside
+    python studies/schlick_half_vector.py --table view-rise half-vector rise-inside
+
+(``half-vector``: the sun's rise at its half vector, branch
+``schlick-half-vector``; ``rise-inside``: the rise inside the lobe's
+integral for the sky and the sun, branch ``schlick-in-lobe``. Stop 51's
+answers are in ``studies/results/schlick_half_vector/``.)
 
 A development tool on seen sets: it decides nothing (a holdout's rule does;
 studies/README.md). Bundles go to ``studies/out/schlick_half_vector/bundles``,

@@ -88,7 +88,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
-    "radiance-ward", "within-10",
+    "radiance-ward", "within-10", "in-lobe",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -113,6 +113,9 @@ SCORED_ELSEWHERE = {
     # holdout 18's candidate, branch tied-within-10: where PSIS-LOO is
     # unreliable, the sky families within 10 nats of the best share the weight
     "within-10": "perez",
+    # holdout 18's second candidate, branch schlick-in-lobe: ggx-schlick with
+    # Schlick's rise inside the lobe's integral (bayesgloss.lobes.ggx_schlick_rise_basis)
+    "in-lobe": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -162,7 +165,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout5": ("baseline", "perez"),  # and day-exposure, merged
     "mitsuba_holdout6": ("baseline", "perez", "ground-shadow"),
     "mitsuba_holdout7": ("baseline", "perez"),  # and radiance-ward, merged
-    "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, merged
+    "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -177,7 +180,7 @@ DEFAULT_METHODS = {
     "validation_holdout15": ("baseline", "perez"),  # and day-exposure, merged
     "validation_holdout16": ("baseline", "perez", "ground-shadow"),
     "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
-    "validation_holdout18": ("baseline", "perez"),  # and within-10, merged
+    "validation_holdout18": ("baseline", "perez"),  # and within-10, in-lobe, merged
 }
 
 
@@ -427,11 +430,12 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
 #: exactly (same seeds, same code on that path), so its answer is copied
 #: instead of fitted again (``--candidate``, :func:`_cached`):
 #: ``within-10`` changes only the weights that ``equal_when_unreliable``
-#: gives where its guard acts (flagged ``sky-family-not-identifiable``).
-#: A change to one lobe family's fit would act only where the lobe
-#: families were stacked (its entry in ``lobe_families``).
+#: gives where its guard acts (flagged ``sky-family-not-identifiable``);
+#: ``in-lobe`` only the ``ggx-schlick`` fit of the lobe stack, which runs
+#: where the lobe families were stacked (a ``ggx-schlick`` entry).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
+    "in-lobe": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
 }
 
 

@@ -195,8 +195,9 @@ def test_validation_calibration_randomises_the_pit_on_an_atom(tmp_path):
 def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(tmp_path):
     # --candidate NAME FOLDER: where the default's score of the bundle shows
     # the candidate's change cannot act (within-10: the equal-weights guard
-    # did not act), its answer is the default's, marked; where it can act,
-    # or the default has not scored the bundle, it is fitted
+    # did not act; in-lobe: no ggx-schlick fit), its answer is the default's,
+    # marked; where it can act, or the default has not scored the bundle, it
+    # is fitted
     if str(STUDIES) not in sys.path:
         sys.path.insert(0, str(STUDIES))
     validate = importlib.import_module("validate_radiance")
@@ -218,6 +219,14 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
     assert same("plain")["median"] == 0.6
     assert same("not-scored-yet") is None
     assert validate._same_as_default(tmp_path / "tied", None) is None
+    # in-lobe: only where the lobe stack fitted ggx-schlick
+    lobes = {"median": 0.5, "flags": [], "lobe_families": {"phong": {}, "ggx-schlick": {}}}
+    phong = {"median": 0.7, "flags": ["lobe-family-not-stacked"], "lobe_families": {"phong": {}}}
+    (default / "lobes.json").write_text(json.dumps({"perez": lobes}))
+    (default / "phong.json").write_text(json.dumps({"perez": phong}))
+    bundles = tmp_path / "bundles"
+    assert validate._same_as_default(bundles / "lobes", ("in-lobe", default)) is None
+    assert validate._same_as_default(bundles / "phong", ("in-lobe", default))["median"] == 0.7
 
 
 def test_validation_family_table_reads_the_default_method():
