@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bayesgloss import fresnel as fr  # noqa: E402
-from bayesgloss import lobes, reflectance  # noqa: E402
+from bayesgloss import lobes, reflectance, render  # noqa: E402
 from bayesgloss import mitsuba_render as mr  # noqa: E402
 
 #: The bundle's luminance weights of an RGB triple.
@@ -44,14 +44,13 @@ def _in_plane(degrees) -> np.ndarray:
     return np.stack([np.sin(t), 0 * t, np.cos(t)], -1)
 
 
-def _eval(mi, bsdf, view, light, component=None) -> float:
-    """Mitsuba's f cos(light) toward ``view``, luminance."""
+def _eval(mi, bsdf, view, light) -> float:
+    """Mitsuba's f cos(light) toward ``view``, both parts, luminance."""
     si = mi.SurfaceInteraction3f()
     si.wi = mi.Vector3f(*view)
-    ctx = mi.BSDFContext()
-    if component is not None:
-        ctx.component = component
-    return float(np.array(bsdf.eval(ctx, si, mi.Vector3f(*light))).reshape(3) @ LUMINANCE)
+    return float(
+        np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*light))).reshape(3) @ LUMINANCE
+    )
 
 
 def _albedo(mi, bsdf, view, component, rng, samples: int = 20000) -> float:
@@ -103,8 +102,6 @@ def sun_ratios(mi, bsdf, gamma, albedo, alpha, sun_degrees, view_degrees):
 
 def sky_ratios(mi, bsdf, gamma, albedo, alpha, view_degrees, rng):
     """Mitsuba over the model under a uniform sky: (glossy part, diffuse part)."""
-    from bayesgloss import render
-
     views = _in_plane(view_degrees)
     geom = render.ViewGeometry(np.tile(NORMAL, (len(views), 1)), views)
     lobe = lobes.ggx_glossy_basis(geom, _Uniform(), [alpha], ground="sky")[:, 0, 0]

@@ -7,7 +7,7 @@ the half vector of the sun and the view, and against Mitsuba's own
 ``roughplastic`` BSDF the view's rise made the sun's light 0.34-1.74
 times Mitsuba's over views of -75..75 degrees (``tests/test_fresnel.py``).
 On the seen Mitsuba holdouts 4 and 5 the default read the many-facet
-plastics glossier than they are (by 0.08 on average, up to 0.34), mostly
+plastics glossier than they are (by 0.09 on average over 16, up to 0.34), mostly
 where ``ggx-schlick`` had the weight. This script asks, on a few of those
 seen sequences rendered again from their committed configs, what the
 ``ggx-schlick`` fit alone reads under the sky family the default weighed
@@ -83,7 +83,7 @@ def render(set_name: str, name: str, threads: int = 1) -> Path:
 
 
 def fit(path: Path, sky: str, jobs: int = 1) -> dict:
-    """``ggx-schlick`` alone under ``sky``: the object's gamma and the Fresnel unknowns."""
+    """``ggx-schlick`` alone under ``sky``: the object's gamma and the Fresnel strength k."""
     from bayesgloss import bundle as bundle_io
     from bayesgloss import estimate
 

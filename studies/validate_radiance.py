@@ -483,9 +483,9 @@ def _cached(
     if same is not None:
         out["perez"] = same
         todo.remove("perez")
-        file.write_text(json.dumps(out, indent=1))
     if todo:
         out = score_bundle(str(path), max_sweeps, todo, out)
+    if todo or same is not None:
         file.write_text(json.dumps(out, indent=1))
     return out
 
