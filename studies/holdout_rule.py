@@ -213,8 +213,15 @@ def main(argv=None) -> dict:
             for m in methods:
                 print(_line(m, figs[m]))
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+        Path(args.json).write_text(json.dumps(out, indent=1, default=_plain) + "\n")
     return out
+
+
+def _plain(value):
+    """A numpy scalar (a count, a flag) as the Python number JSON writes."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
 if __name__ == "__main__":

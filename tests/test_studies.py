@@ -339,13 +339,19 @@ def test_holdout_rule_pools_sets_and_refuses_a_set_much_worse():
     assert not hr.rule({"one": slow}, "d", "c")["conditions"]["e"]
 
 
-def test_holdout_rule_reads_holdout16_as_stop_49_decided():
+def test_holdout_rule_reads_holdout16_as_stop_49_decided(tmp_path):
     # stop 49's decision on the committed scores: sun-lit MAE 0.067 -> 0.052,
-    # held 16/18 -> 17/18, one confident miss each, overcast 4/6 -> 5/6, 1.09x
+    # held 16/18 -> 17/18, one confident miss each, overcast 4/6 -> 5/6, 1.09x;
+    # --json writes the same figures (numpy counts as JSON numbers)
     if str(STUDIES) not in sys.path:
         sys.path.insert(0, str(STUDIES))
     hr = importlib.import_module("holdout_rule")
-    out = hr.main(["--set", "validation_holdout16", "--candidate", "ground-shadow"])
+    written = tmp_path / "rule.json"
+    out = hr.main(
+        ["--set", "validation_holdout16", "--candidate", "ground-shadow", "--json", str(written)]
+    )
+    again = json.loads(written.read_text())
+    assert again["met"] is True and again["pooled"]["perez"]["held"] == 16
     d, c = out["pooled"]["perez"], out["pooled"]["ground-shadow"]
     assert round(d["mae"], 3) == 0.067 and round(c["mae"], 3) == 0.052
     assert (d["held"], c["held"], d["sun_lit"]) == (16, 17, 18)
