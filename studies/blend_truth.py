@@ -16,7 +16,10 @@ truths of 0.270, 0.416 and 0.733; its diffuse part is rendered right,
 smooth metal of each Mitsuba set given, beside the manifest's truth and
 the default's answer where the set is scored::
 
-    python studies/blend_truth.py mitsuba_holdout4 mitsuba_holdout7
+    python studies/blend_truth.py mitsuba_holdout4 mitsuba_holdout7 [--json]
+
+(``--json`` writes ``results/blend_truth_<set>.json``, which
+``holdout_rule.py --blend-truth`` reads.)
 
 A diagnosis on seen sets: the truth the sets are scored on is unchanged.
 """
@@ -97,7 +100,10 @@ def rendered_gloss(material: mr.MitsubaMaterial, spp: int = 4096) -> float:
 
 
 def main(argv=None) -> None:
-    for set_name in argv if argv is not None else sys.argv[1:]:
+    args = list(sys.argv[1:] if argv is None else argv)
+    write = "--json" in args
+    for set_name in [a for a in args if a != "--json"]:
+        sampled = {}
         manifest = json.loads((RESULTS / f"{set_name}.json").read_text())
         scored = RESULTS / f"validation_{set_name}.json"
         answers = {}
@@ -109,6 +115,12 @@ def main(argv=None) -> None:
             if mat["kind"] != "conductor" or mat["weight"] >= 1:
                 continue
             g = sampled_gloss(mr.MitsubaMaterial.from_dict(mat))
+            sampled[item["name"].split("-")[0]] = {
+                "name": item["name"],
+                "weight": mat["weight"],
+                "truth": item["gloss"],
+                "sampled": g,
+            }
             line = f"{set_name} {item['name']} w {mat['weight']:.3f} truth {item['gloss']:.3f}"
             line += f" rendered {g:.3f}"
             s = answers.get(item["name"].split("-")[0])
@@ -117,6 +129,10 @@ def main(argv=None) -> None:
                 line += f" default {p['median']:.3f} [{p['hdi90'][0]:.2f}, {p['hdi90'][1]:.2f}]"
                 line += f" sun-lit {s['direct_sun']}"
             print(line, flush=True)
+        if write:  # for holdout_rule.py --blend-truth
+            out = RESULTS / f"blend_truth_{set_name}.json"
+            out.write_text(json.dumps({"set": set_name, "sequences": sampled}, indent=1) + "\n")
+            print(f"wrote {out}")
 
 
 if __name__ == "__main__":

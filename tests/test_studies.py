@@ -382,3 +382,24 @@ def test_blend_truth_reads_the_blend_as_the_path_tracer_samples_it():
     # and Mitsuba's own render of the material holds what the sampling says
     # (0.212 against 0.210 measured at 4096 spp; 512 here: about 1 %)
     assert abs(bt.rendered_gloss(blend, spp=512) - sampled) < 0.03
+
+
+def test_holdout_rule_scores_blended_smooth_metals_against_what_their_frames_hold():
+    # with_blend_truth replaces the truth of the sequences blend_truth.py
+    # read (by their "msNN" prefix) and leaves the others: a smooth metal
+    # read 0.10 for a truth of 0.27 whose frames hold 0.09 is an error of
+    # 0.01, not 0.17
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    hr = importlib.import_module("holdout_rule")
+    scores = [
+        _rule_score("ms10", 0.27, True, (0.10, 0.0, 0.12, 100), (0.10, 0.0, 0.12, 100)),
+        _rule_score("ms11", 0.50, True, (0.52, 0.4, 0.6, 100), (0.52, 0.4, 0.6, 100)),
+    ]
+    scores[0]["bundle"], scores[1]["bundle"] = "ms10-smooth-metal-abc", "ms11-rough-metal-def"
+    blended = hr.with_blend_truth(scores, {"ms10": {"sampled": 0.09}})
+    assert [s["truth"] for s in blended] == [0.09, 0.50] and scores[0]["truth"] == 0.27
+    before = hr.rule({"m": scores}, "d", "c")["pooled"]["d"]
+    after = hr.rule({"m": blended}, "d", "c")["pooled"]["d"]
+    assert before["mae"] == pytest.approx(0.095) and after["mae"] == pytest.approx(0.015)
+    assert before["confident_misses"] == ["ms10"] and after["confident_misses"] == []
