@@ -115,15 +115,16 @@ def main(argv=None) -> None:
             if mat["kind"] != "conductor" or mat["weight"] >= 1:
                 continue
             g = sampled_gloss(mr.MitsubaMaterial.from_dict(mat))
-            sampled[item["name"].split("-")[0]] = {
+            key = item["name"].split("-")[0]
+            sampled[key] = {
                 "name": item["name"],
                 "weight": mat["weight"],
                 "truth": item["gloss"],
                 "sampled": g,
             }
             line = f"{set_name} {item['name']} w {mat['weight']:.3f} truth {item['gloss']:.3f}"
-            line += f" rendered {g:.3f}"
-            s = answers.get(item["name"].split("-")[0])
+            line += f" sampled {g:.3f}"
+            s = answers.get(key)
             if s and "perez" in s:
                 p = s["perez"]
                 line += f" default {p['median']:.3f} [{p['hdi90'][0]:.2f}, {p['hdi90'][1]:.2f}]"

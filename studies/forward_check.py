@@ -183,14 +183,21 @@ def spreads(y, model) -> dict:
     }
 
 
-def check(path: Path, config: sequences.SequenceConfig) -> dict:
-    """One rendered sequence against each forward model of :func:`predictions`."""
-    b = bundle_io.read_bundle(path)
+def checked_entries(b):
+    """A bundle's luminances with the sun up (NaN elsewhere), (F, T), the
+    facets the estimator fits by default (at least :data:`MIN_FRAMES` such
+    frames, not facing the ground), (F,), and those facing the ground."""
     curves = bundle_io.facet_curves(b)
     y = np.where(curves.valid & b.sun_up[None, :], curves.luminance, np.nan)
     facing_down = np.asarray(b.facets.normal)[:, 2] < GROUND_FACING_NZ
-    # the facets the estimator fits by default: enough frames, not facing the ground
     checked = (np.isfinite(y).sum(axis=1) >= MIN_FRAMES) & ~facing_down
+    return y, checked, facing_down
+
+
+def check(path: Path, config: sequences.SequenceConfig) -> dict:
+    """One rendered sequence against each forward model of :func:`predictions`."""
+    b = bundle_io.read_bundle(path)
+    y, checked, facing_down = checked_entries(b)
     day = true_sky(config, b.sun_direction)
     out = {
         "name": config.name.removesuffix("-clean"),

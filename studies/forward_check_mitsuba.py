@@ -64,7 +64,6 @@ from bayesgloss import bundle as bundle_io  # noqa: E402
 from bayesgloss import fresnel as fr  # noqa: E402
 from bayesgloss import illumination as il  # noqa: E402
 from bayesgloss import mitsuba_render as mr  # noqa: E402
-from bayesgloss.ground_facing import GROUND_FACING_NZ  # noqa: E402
 from bayesgloss.object_shadow import averaged_bases, shadow_points  # noqa: E402
 
 CACHE = HERE / "out" / "forward_check_mitsuba" / "bundles"
@@ -128,8 +127,8 @@ def model_predictions(b, checked, sequence: mr.MitsubaSequence) -> dict:
         g_s = bases.glossy_rise[p][:, :1, :]
         sun = terms.sun_direct if p == 0 else None
         sun_rough = terms.sun_direct_nodes[:, 0] if p == 0 else None
-        out["none"] = out["none"] + albedo * ((1 - gamma) * d + gamma * g)
         base = (1 - gamma) * d + gamma * g
+        out["none"] = out["none"] + albedo * base
         out["view-rise"] = out["view-rise"] + albedo * fr.fresnel_parts(
             base, g, 1.0, log_a, terms.view, sun, gamma
         )
@@ -145,10 +144,7 @@ def model_predictions(b, checked, sequence: mr.MitsubaSequence) -> dict:
 def check(path: Path, sequence: mr.MitsubaSequence) -> dict:
     """One clean render against each model of :func:`model_predictions`."""
     b = bundle_io.read_bundle(path)
-    curves = bundle_io.facet_curves(b)
-    y = np.where(curves.valid & b.sun_up[None, :], curves.luminance, np.nan)
-    facing_down = np.asarray(b.facets.normal)[:, 2] < GROUND_FACING_NZ
-    checked = (np.isfinite(y).sum(axis=1) >= forward_check.MIN_FRAMES) & ~facing_down
+    y, checked, _ = forward_check.checked_entries(b)
     out = {
         "name": sequence.config.name.removesuffix("-clean"),
         "kind": sequence.material.kind,

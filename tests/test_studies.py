@@ -20,10 +20,15 @@ import pytest
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
 
-def run_study(name: str, tmp_path: Path, *extra: str, jobs: int = 1, config=None):
+def study_module(name: str):
+    """The study script ``studies/<name>.py`` as a module."""
     if str(STUDIES) not in sys.path:
         sys.path.insert(0, str(STUDIES))
-    module = importlib.import_module(f"study_{name}")
+    return importlib.import_module(name)
+
+
+def run_study(name: str, tmp_path: Path, *extra: str, jobs: int = 1, config=None):
+    module = study_module(f"study_{name}")
     out = tmp_path / name
     summary = module.main(["--quick", "--jobs", str(jobs), "--out", str(out), *extra], config)
     assert (out / f"{name}.png").stat().st_size > 10_000
@@ -178,9 +183,7 @@ def test_validation_calibration_randomises_the_pit_on_an_atom(tmp_path):
     # atom (pit_le = P(draw <= truth) = 0.6 here) the PIT is U(0, 0.6): a central
     # 90 % interval holds it with probability 0.55 / 0.6 = 0.917; 400 scores put
     # the observed share within 0.05 of it (binomial sd 0.014)
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    validate = importlib.import_module("validate_radiance")
+    validate = study_module("validate_radiance")
     scores = [
         {"direct_sun": True, "class": "rough-metal", "m": {"pit": 0.0, "pit_le": 0.6}}
         for _ in range(400)
@@ -198,9 +201,7 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
     # did not act; in-lobe: no ggx-schlick fit), its answer is the default's,
     # marked; where it can act, or the default has not scored the bundle, it
     # is fitted
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    validate = importlib.import_module("validate_radiance")
+    validate = study_module("validate_radiance")
     default = tmp_path / "default"
     default.mkdir()
     entries = {
@@ -236,9 +237,7 @@ def test_validation_family_table_reads_the_default_method():
     # per-frame mixture "auto", the day is named by the mixture's own
     # most-weighted sky model; an auto-exposure day rendered under one of
     # gensky's skies counts toward the gensky goal like any other
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    validate = importlib.import_module("validate_radiance")
+    validate = study_module("validate_radiance")
 
     def score(category, sky, most, weights, mixture=None):
         stack = {"most_weight": most, "families": {k: {"weight": w} for k, w in weights.items()}}
@@ -306,9 +305,7 @@ def _rule_score(bundle, truth, sun, default, candidate):
 
 
 def test_holdout_rule_pools_sets_and_refuses_a_set_much_worse():
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    hr = importlib.import_module("holdout_rule")
+    hr = study_module("holdout_rule")
     one = [
         _rule_score("vs00", 0.5, True, (0.60, 0.55, 0.65, 100), (0.50, 0.40, 0.60, 110)),
         _rule_score("vs01", 0.3, True, (0.30, 0.10, 0.50, 100), (0.31, 0.10, 0.50, 110)),
@@ -343,9 +340,7 @@ def test_holdout_rule_reads_holdout16_as_stop_49_decided(tmp_path):
     # stop 49's decision on the committed scores: sun-lit MAE 0.067 -> 0.052,
     # held 16/18 -> 17/18, one confident miss each, overcast 4/6 -> 5/6, 1.09x;
     # --json writes the same figures (numpy counts as JSON numbers)
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    hr = importlib.import_module("holdout_rule")
+    hr = study_module("holdout_rule")
     written = tmp_path / "rule.json"
     out = hr.main(
         ["--set", "validation_holdout16", "--candidate", "ground-shadow", "--json", str(written)]
@@ -368,9 +363,7 @@ def test_blend_truth_reads_the_blend_as_the_path_tracer_samples_it():
     # draws: about 2 %); a reader that weighted the delta lobe by w would
     # give the truth and fail; a render of the material agrees
     pytest.importorskip("mitsuba")
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    bt = importlib.import_module("blend_truth")
+    bt = study_module("blend_truth")
     from bayesgloss import mitsuba_render as mr
 
     metal = dict(kind="conductor", diffuse=0.143, eta=(1.538, 0.2616, 0.7153))
@@ -389,9 +382,7 @@ def test_holdout_rule_scores_blended_smooth_metals_against_what_their_frames_hol
     # read (by their "msNN" prefix) and leaves the others: a smooth metal
     # read 0.10 for a truth of 0.27 whose frames hold 0.09 is an error of
     # 0.01, not 0.17
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    hr = importlib.import_module("holdout_rule")
+    hr = study_module("holdout_rule")
     scores = [
         _rule_score("ms10", 0.27, True, (0.10, 0.0, 0.12, 100), (0.10, 0.0, 0.12, 100)),
         _rule_score("ms11", 0.50, True, (0.52, 0.4, 0.6, 100), (0.52, 0.4, 0.6, 100)),
