@@ -252,10 +252,11 @@ def illumination_bases(
     lobe_family : {"phong", "ward", "ggx"}
         The glossy lobe's family (:mod:`bayesgloss.lobes`), tabulated on the
         Phong-equivalent ``exponents``.
-    fresnel : {"radiance", "schlick"}
+    fresnel : {"radiance", "schlick", "schlick-lobe"}
         Whose Fresnel rise the bases' Fresnel terms hold
         (:data:`bayesgloss.fresnel.FRESNEL_RISES`), for a one-material model
-        with that Fresnel model.
+        with that Fresnel model; ``"schlick-lobe"`` (GGX only) adds G^S of
+        each source (:attr:`bayesgloss.fresnel.FresnelTerms.glossy_rise`).
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...). ``occlusion`` (a
@@ -272,11 +273,27 @@ def illumination_bases(
     def bases(d):
         return lobes.facet_bases(geometry, d, exponents, family=lobe_family, **kwargs)
 
+    rise = None
+    if fresnel in fr.IN_LOBE:  # G^S of each source beside its glossy part
+        if lobe_family != fr.IN_LOBE[fresnel]:
+            raise ValueError(
+                f"Fresnel model {fresnel!r} takes the rise inside the "
+                f"{fr.IN_LOBE[fresnel]!r} lobe, not the {lobe_family!r} lobe"
+            )
+        kept = ("ground", "ground_reflectance", "occlusion")
+
+        def rise(d):
+            return lobes.ggx_schlick_rise_basis(
+                geometry, d, exponents, **{k: v for k, v in kwargs.items() if k in kept}
+            )
+
     parts = [bases(d) for d in (sun_only, sky_a)]
     d_parts, g_parts = [p.diffuse for p in parts], [p.glossy for p in parts]
+    r_parts = [] if rise is None else [rise(d) for d in (sun_only, sky_a)]
     if not others:
         d_parts.append(d_parts[1])
         g_parts.append(g_parts[1])
+        r_parts = r_parts + r_parts[1:2]
     e_a = horizontal_irradiance(sky_a, include_sun=False)
     sun_a = np.broadcast_to(day.solar_radiance, e_a.shape)
     ratios = [np.zeros(e_a.shape)]
@@ -291,14 +308,19 @@ def illumination_bases(
             factor = np.where(e_b > 0, e_a / e_b, 0.0)  # (T,)
         d_parts.append(other.diffuse * factor)
         g_parts.append(other.glossy * factor)
+        if rise is not None:
+            r_parts.append(rise(sky_b) * factor)
     sun_dir, e_sun = render._sun_terms(day)  # the disc's normal irradiance, 0 below the horizon
+    terms = _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun, fresnel), kwargs.get("occlusion"))
+    if rise is not None:
+        terms = dataclasses.replace(terms, glossy_rise=np.stack(r_parts))
     return IlluminationBases(
         np.stack(d_parts),
         np.stack(g_parts),
         parts[0].exponents,
         1 + len(others),
         np.stack(ratios),
-        _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun, fresnel), kwargs.get("occlusion")),
+        terms,
     )
 
 
@@ -419,6 +441,19 @@ class JointData:
         p = self.sources if self.shapes >= 2 else 2
         nxt = np.concatenate([g[:p, :, 1:], g[:p, :, -1:]], axis=2)
         rows = np.stack([g[:p] - d[:p], nxt - g[:p]])  # (2, P, F, N, T)
+        return np.ascontiguousarray(rows.reshape(2, p, -1, g.shape[-1]))
+
+    @functools.cached_property
+    def rise_tables(self) -> np.ndarray | None:
+        """G^S of the Fresnel terms (:attr:`bayesgloss.fresnel.FresnelTerms.glossy_rise`)
+        and its step to the next node, laid out as :attr:`tables`, (2, P, F N,
+        T); None where the Fresnel model has no rise inside the lobe."""
+        if self.fresnel is None or self.fresnel.glossy_rise is None:
+            return None
+        g = self.fresnel.glossy_rise
+        p = self.sources if self.shapes >= 2 else 2
+        nxt = np.concatenate([g[:p, :, 1:], g[:p, :, -1:]], axis=2)
+        rows = np.stack([g[:p], nxt - g[:p]])  # (2, P, F, N, T)
         return np.ascontiguousarray(rows.reshape(2, p, -1, g.shape[-1]))
 
     @functools.cached_property
@@ -744,7 +779,8 @@ def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, ...]:
     the table's nodes (with one sky model, its copy second). Where the data
     carry Fresnel terms and theta its columns (k, log A at
     :data:`bayesgloss.fresnel.FRESNEL_COLUMNS`), with the Fresnel raise of
-    :func:`bayesgloss.fresnel.fresnel_parts`."""
+    :func:`bayesgloss.fresnel.fresnel_parts`, or inside the lobe
+    (:func:`bayesgloss.fresnel.fresnel_parts_in_lobe`) where the terms carry G^S."""
     rows = data.tables if tables is None else tables
     sources = rows.shape[1]
     n = len(data.log_n_grid)
@@ -759,7 +795,25 @@ def unit_parts(theta, data: JointData, tables=None) -> tuple[np.ndarray, ...]:
     if data.fresnel is None or theta.shape[-1] <= a_col:
         parts = gamma * glossy_minus_diffuse
         parts += diffuse
-    else:  # the Fresnel raise
+    elif data.fresnel.glossy_rise is not None:  # the rise inside the lobe
+        k, log_a = theta[..., k_col : k_col + 1], theta[..., a_col : a_col + 1]
+        s = np.take(data.rise_tables, index.ravel(), axis=2).reshape(2, sources, *j.shape, -1)
+        rise = w[..., None] * s[1]
+        rise += s[0]  # (P, E, F, W, T)
+        parts = [
+            fr.fresnel_parts_in_lobe(
+                diffuse[p],
+                diffuse[p] + glossy_minus_diffuse[p],
+                rise[p],
+                k,
+                log_a,
+                data.fresnel.view,
+                gamma,
+                data.fresnel.sun_direct if p == 0 else None,
+            )
+            for p in range(sources)
+        ]
+    else:  # the Fresnel raise at the view
         k, log_a = theta[..., k_col : k_col + 1], theta[..., a_col : a_col + 1]
         parts = [
             fr.fresnel_parts(

@@ -40,7 +40,9 @@ Under Ward and GGX, the posterior's ``n`` is this equivalent exponent and
 its ``roughness`` the family's alpha.
 
 The Fresnel raise of :mod:`bayesgloss.fresnel` can be combined with any
-family; no family here has a Fresnel factor of its own.
+family; no family here has a Fresnel factor of its own. For GGX the rise
+can also be taken inside the lobe's integral, at each light's own half
+vector (:func:`ggx_schlick_rise_basis`, Fresnel model ``"schlick-lobe"``).
 """
 
 from __future__ import annotations
@@ -59,6 +61,8 @@ __all__ = [
     "ggx_smith",
     "ggx_normal_albedo",
     "ggx_glossy_basis",
+    "schlick_rise",
+    "ggx_schlick_rise_basis",
     "glossy_basis",
     "facet_bases",
 ]
@@ -212,6 +216,7 @@ def ggx_glossy_basis(
     n_phi: int = 16,
     chunk: int = 16,
     occlusion: render.Occlusion | None = None,
+    rise_inside: bool = False,
 ) -> np.ndarray:
     """G_f(t; alpha): radiance of white facets with the normalised GGX lobe.
 
@@ -243,6 +248,10 @@ def ggx_glossy_basis(
     occlusion : bayesgloss.render.Occlusion, optional
         What a non-convex object's mesh hides from each facet, as in
         :func:`bayesgloss.render.ward_glossy_basis`; None: a convex object.
+    rise_inside : bool
+        Weight each light's direction i by Schlick's rise S(h.i) = (1 -
+        h.i)^5 at its own half vector (h.i = h.o), the sun's by S(h.s):
+        G^S of :func:`ggx_schlick_rise_basis`.
 
     Returns
     -------
@@ -262,12 +271,17 @@ def ggx_glossy_basis(
         g = smith_ggx_g1(cos_i, a) * smith_ggx_g1(np.broadcast_to(cos_o, cos_i.shape), a)
         ok = (cos_i > 0) & (ho > 0) & (cos_o > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(ok, g * ho / (cd[None, :, :, None] * cos_o), 0.0)
+            w = np.where(ok, g * ho / (cd[None, :, :, None] * cos_o), 0.0)
+        return w * schlick_rise(ho) if rise_inside else w
 
-    def sun_brdf(sun, o_, n_):  # f(sun, o) / A
+    def sun_brdf(sun, o_, n_):  # f(sun, o) / A, times S(h.s) with rise_inside
         f = ggx_smith(
             sun[None, None, :, :], o_[:, None, None, :], n_[:, None, None, :], alpha[None, :, None]
         )  # (C, N, T)
+        if rise_inside:
+            h = sun[None, :, :] + o_[:, None, :]  # (C, T, 3)
+            h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+            f = f * schlick_rise(np.sum(h * sun[None, :, :], axis=-1))[:, None, :]
         return f / albedo[None, :, None]
 
     node_weight = (w_u[None, :] / n_phi) / albedo[:, None]
@@ -285,6 +299,40 @@ def ggx_glossy_basis(
         chunk=chunk,
         occlusion=occlusion,
     )
+
+
+def schlick_rise(cos_h: ArrayLike) -> NDArray[np.float64]:
+    """Schlick's (1994) rise S = (1 - cos)^5 at the cosine of a light's
+    angle to the half vector, clipped to [0, 1] (F = F0 + (1 - F0) S)."""
+    return (1.0 - np.clip(np.asarray(cos_h, dtype=float), 0.0, 1.0)) ** 5
+
+
+def ggx_schlick_rise_basis(
+    geometry: render.ViewGeometry,
+    sky,
+    exponents=render.DEFAULT_EXPONENTS,
+    *,
+    ground: str = "plane",
+    ground_reflectance: float = 0.2,
+    occlusion: render.Occlusion | None = None,
+) -> np.ndarray:
+    """G^S_f(t; n): the GGX basis with Schlick's rise inside its integral, (F, N, T).
+
+    A microfacet lobe's Fresnel factor F(h.i) = F0 + (1 - F0) S(h.i) varies
+    over the lobe (Walter et al. 2007, eq. 20): each light's direction i has
+    its own half vector h with the view. Linear in F0, the lobe with it is
+    F0 G + (1 - F0) G^S, G = :func:`ggx_glossy_basis` and G^S the same
+    integral with each direction weighted by S(h.i) (the sun's by S(h.s)),
+    divided by the same normal albedo. :func:`bayesgloss.fresnel.fresnel_parts_in_lobe`
+    puts it in the one-material model (Fresnel model ``"schlick-lobe"``).
+    On the Phong-equivalent ``exponents`` (sorted), as :func:`glossy_basis`
+    [W sr^-1 m^-2].
+    """
+    n = np.sort(np.atleast_1d(np.asarray(exponents, dtype=float)))
+    common = dict(ground=ground, ground_reflectance=ground_reflectance)
+    if occlusion is not None:
+        common["occlusion"] = occlusion
+    return ggx_glossy_basis(geometry, sky, roughness_of_exponent(n), rise_inside=True, **common)
 
 
 def glossy_basis(

@@ -128,8 +128,12 @@ def averaged_bases(bases, owner, n_facets: int):
 
     fresnel = bases.fresnel
     if fresnel is not None:
+        rise = fresnel.glossy_rise
         fresnel = dataclasses.replace(
-            fresnel, view=mean(fresnel.view, 0), sun_direct=mean(fresnel.sun_direct, 0)
+            fresnel,
+            view=mean(fresnel.view, 0),
+            sun_direct=mean(fresnel.sun_direct, 0),
+            glossy_rise=None if rise is None else mean(rise, 1),
         )
     return dataclasses.replace(
         bases, diffuse=mean(bases.diffuse, 1), glossy=mean(bases.glossy, 1), fresnel=fresnel
