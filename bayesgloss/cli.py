@@ -663,8 +663,9 @@ def _parser() -> argparse.ArgumentParser:
         f"{DEFAULT_FRESNEL!r}): 'radiance' raises the glossy part toward grazing views by "
         "Radiance's Fresnel estimate, with its strength (0: Radiance's rough materials, "
         "1: smooth ones and real surfaces) and the normal-incidence albedo inferred; "
-        "'schlick' the same with Schlick's rise (1 - cos)^5, a dielectric coating's "
-        "(bayesgloss.fresnel)",
+        "'schlick' the same with Schlick's rise (1 - cos)^5, a dielectric coating's; "
+        "'schlick-lobe' Schlick's rise inside the GGX lobe, at each light's half vector "
+        "(a rough coating's; lobe 'ggx') (bayesgloss.fresnel)",
     )
     es.add_argument(
         "--lobe",

@@ -44,6 +44,7 @@ is each family's Phong-equivalent exponent (:func:`bayesgloss.lobes.roughness_of
 
 from __future__ import annotations
 
+from .fresnel import IN_LOBE
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import DEFAULT_FRESNEL, DEFAULT_LOBE_FAMILY
 from .lobes import LOBE_FAMILIES, check_lobe_family, roughness_of_exponent
@@ -81,7 +82,11 @@ def default_lobe(
     named sky or Fresnel model and of ``--sky auto`` (whose speed goal, 30 s
     on the benchmark bundle, the stack's four fits would break: 61-134 s
     against 15-28), and of a mesh bundle, whose faces' albedo is stacked
-    instead (:mod:`bayesgloss.occluder_albedo`; one stack at a time)."""
+    instead (:mod:`bayesgloss.occluder_albedo`; one stack at a time). A
+    Fresnel model whose rise is inside a lobe (:data:`bayesgloss.fresnel.IN_LOBE`)
+    takes that lobe."""
+    if fresnel in IN_LOBE:
+        return IN_LOBE[fresnel]
     if joint and illumination == "families" and fresnel == DEFAULT_FRESNEL and not has_mesh:
         return DEFAULT_LOBE
     return DEFAULT_LOBE_FAMILY
@@ -91,7 +96,9 @@ def check_lobe(lobe: str, fresnel: str, joint: bool) -> tuple[str, bool]:
     """``estimate``'s ``lobe`` checked against its other options: (lobe,
     whether it is a stack, ``"families"`` or ``"materials"``). A ValueError
     for an unknown family, a Fresnel model named with ``"materials"`` (which
-    chooses each fit's own), or any lobe but the default without the joint model."""
+    chooses each fit's own), a lobe other than the one a Fresnel model's rise
+    is inside (:data:`bayesgloss.fresnel.IN_LOBE`), or any lobe but the
+    default without the joint model."""
     stacked = lobe in ("families", "materials")
     if not stacked:
         check_lobe_family(lobe)
@@ -99,6 +106,11 @@ def check_lobe(lobe: str, fresnel: str, joint: bool) -> tuple[str, bool]:
         raise ValueError(
             f"lobe 'materials' chooses each fit's Fresnel model itself; fresnel "
             f"'{fresnel}' cannot be given with it"
+        )
+    if fresnel in IN_LOBE and lobe != IN_LOBE[fresnel]:
+        raise ValueError(
+            f"fresnel '{fresnel}' takes its rise inside the '{IN_LOBE[fresnel]}' lobe; "
+            f"lobe '{lobe}' cannot be given with it"
         )
     if lobe != DEFAULT_LOBE_FAMILY and not joint:
         raise ValueError(

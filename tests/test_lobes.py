@@ -371,3 +371,15 @@ def test_the_default_estimate_fits_the_material_stack(tmp_path, monkeypatch):
         path, illumination="gensky-clear", sampler_options={"max_steps": 100}
     )
     assert "lobe_families" not in res.summary
+
+
+def test_the_rise_inside_the_lobe_takes_its_lobe():
+    # --fresnel schlick-lobe without --lobe fits GGX, the lobe its rise is
+    # inside; another lobe or a stack of lobes with it is refused up front
+    from bayesgloss import lobe_families
+
+    assert lobe_families.default_lobe(True, "schlick-lobe") == "ggx"
+    assert lobe_families.check_lobe("ggx", "schlick-lobe", True) == ("ggx", False)
+    for lobe in ("phong", "ward", "families"):
+        with pytest.raises(ValueError, match="inside the 'ggx' lobe; lobe '"):
+            lobe_families.check_lobe(lobe, "schlick-lobe", True)
