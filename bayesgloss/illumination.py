@@ -221,6 +221,15 @@ class IlluminationBases:
         )
 
 
+def _node_rows(g, less=0.0) -> np.ndarray:
+    """g - ``less`` at each node of the exponent table and g's step to the
+    next node (0 at the last), (2, P, F N, T) for g (P, F, N, T): the rows
+    :func:`unit_parts` gathers, each source's block contiguous."""
+    nxt = np.concatenate([g[:, :, 1:], g[:, :, -1:]], axis=2)
+    rows = np.stack([g - less, nxt - g])  # (2, P, F, N, T)
+    return np.ascontiguousarray(rows.reshape(2, len(g), -1, g.shape[-1]))
+
+
 def _even_mix(sources: int) -> np.ndarray:
     """Weights of the sources at the model's brightness: the sun 1, the sky
     models evenly."""
@@ -437,11 +446,8 @@ class JointData:
         :func:`unit_parts` computes (P, or 2 with one sky model) at every
         (facet, node), (2, P, F N, T): one gather per walker gives every
         source's rows, each source's block contiguous."""
-        g, d = self.glossy, self.diffuse[:, :, None, :]
         p = self.sources if self.shapes >= 2 else 2
-        nxt = np.concatenate([g[:p, :, 1:], g[:p, :, -1:]], axis=2)
-        rows = np.stack([g[:p] - d[:p], nxt - g[:p]])  # (2, P, F, N, T)
-        return np.ascontiguousarray(rows.reshape(2, p, -1, g.shape[-1]))
+        return _node_rows(self.glossy[:p], self.diffuse[:p, :, None, :])
 
     @functools.cached_property
     def rise_tables(self) -> np.ndarray | None:
@@ -450,11 +456,8 @@ class JointData:
         T); None where the Fresnel model has no rise inside the lobe."""
         if self.fresnel is None or self.fresnel.glossy_rise is None:
             return None
-        g = self.fresnel.glossy_rise
         p = self.sources if self.shapes >= 2 else 2
-        nxt = np.concatenate([g[:p, :, 1:], g[:p, :, -1:]], axis=2)
-        rows = np.stack([g[:p], nxt - g[:p]])  # (2, P, F, N, T)
-        return np.ascontiguousarray(rows.reshape(2, p, -1, g.shape[-1]))
+        return _node_rows(self.fresnel.glossy_rise[:p])
 
     @functools.cached_property
     def relative_weights(self) -> np.ndarray:
