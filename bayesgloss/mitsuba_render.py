@@ -404,6 +404,48 @@ def mitsuba_albedos(material: MitsubaMaterial) -> tuple[np.ndarray, np.ndarray]:
     return r_spec, r_diff
 
 
+def mitsuba_directional_albedo(
+    material: MitsubaMaterial, view, part: str, rng: np.random.Generator, samples: int = 4000
+) -> np.ndarray:
+    """Directional albedo of one part of Mitsuba's BSDF toward a view, by its own sampling.
+
+    The mean weight of the loaded BSDF's ``sample`` restricted to one
+    component: the light a facet sends toward ``view`` under a uniform sky of
+    radiance 1 (by reciprocity). Mitsuba's importance sampling puts its draws
+    where a narrow lobe is, which a fixed quadrature misses at grazing views;
+    its noise falls as ``samples ** -0.5`` (about 2 % at 4000 draws for a
+    lobe of alpha 0.2).
+
+    Parameters
+    ----------
+    material : MitsubaMaterial
+    view : array_like (3,)
+        Unit direction toward the camera, in the facet's frame (normal +z).
+    part : {"specular", "diffuse"}
+    rng : numpy.random.Generator
+        Source of the sample's uniform numbers.
+    samples : int
+
+    Returns
+    -------
+    ndarray (3,)
+        RGB directional albedo [-].
+    """
+    if part not in ("specular", "diffuse"):
+        raise ValueError(f"part must be 'specular' or 'diffuse', got {part!r}")
+    mi = _mitsuba()
+    bsdf = mi.load_dict(material.bsdf())
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(*np.asarray(view, dtype=float))
+    ctx = mi.BSDFContext()
+    ctx.component = _COMPONENTS[material.kind][0 if part == "specular" else 1]
+    total = np.zeros(3)
+    for a, b, c in rng.random((samples, 3)):
+        _, weight = bsdf.sample(ctx, si, float(a), mi.Point2f(float(b), float(c)))
+        total += np.array(weight, dtype=float).reshape(3)
+    return total / samples
+
+
 def _fresnel(cos_i, eta, k=0.0) -> np.ndarray:
     """Unpolarised Fresnel reflectance of a boundary of complex relative index
     eta + i k (k = 0: a dielectric, total internal reflection where eta < 1)."""

@@ -33,7 +33,7 @@ from bayesgloss import lobes, reflectance, render  # noqa: E402
 from bayesgloss import mitsuba_render as mr  # noqa: E402
 
 #: The bundle's luminance weights of an RGB triple.
-LUMINANCE = np.array([0.265, 0.670, 0.065])
+LUMINANCE = np.asarray(reflectance.LUMINANCE_WEIGHTS, dtype=float)
 #: (alpha, index of refraction, diffuse reflectance) of the materials checked.
 MATERIALS = ((0.05, 1.5, 0.05), (0.2, 1.5, 0.05), (0.2, 1.8, 0.3))
 NORMAL = np.array([0.0, 0.0, 1.0])
@@ -51,21 +51,6 @@ def _eval(mi, bsdf, view, light) -> float:
     return float(
         np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*light))).reshape(3) @ LUMINANCE
     )
-
-
-def _albedo(mi, bsdf, view, component, rng, samples: int = 20000) -> float:
-    """Mitsuba's directional albedo of one part toward ``view`` (luminance): the
-    mean weight of its own ``sample`` (importance sampling: a narrow lobe at a
-    grazing view is sampled where it is, which a fixed quadrature misses)."""
-    si = mi.SurfaceInteraction3f()
-    si.wi = mi.Vector3f(*view)
-    ctx = mi.BSDFContext()
-    ctx.component = component
-    total = 0.0
-    for a, b, c in rng.random((samples, 3)):
-        _, weight = bsdf.sample(ctx, si, float(a), mi.Point2f(float(b), float(c)))
-        total += float(np.array(weight).reshape(3) @ LUMINANCE)
-    return total / samples
 
 
 def sun_ratios(mi, bsdf, gamma, albedo, alpha, sun_degrees, view_degrees):
@@ -100,7 +85,7 @@ def sun_ratios(mi, bsdf, gamma, albedo, alpha, sun_degrees, view_degrees):
     return mitsuba / model(rise_view), mitsuba / model(rise_half)
 
 
-def sky_ratios(mi, bsdf, gamma, albedo, alpha, view_degrees, rng):
+def sky_ratios(material, gamma, albedo, alpha, view_degrees, rng):
     """Mitsuba over the model under a uniform sky: (glossy part, diffuse part)."""
     views = _in_plane(view_degrees)
     geom = render.ViewGeometry(np.tile(NORMAL, (len(views), 1)), views)
@@ -108,8 +93,8 @@ def sky_ratios(mi, bsdf, gamma, albedo, alpha, view_degrees, rng):
     rise = reflectance.fresnel_schlick(views[:, 2])
     out = []
     for deg, o, g, r in zip(np.atleast_1d(view_degrees), views, lobe, rise, strict=True):
-        spec = _albedo(mi, bsdf, o, 0, rng)
-        diff = _albedo(mi, bsdf, o, 1, rng, samples=5000)
+        spec = mr.mitsuba_directional_albedo(material, o, "specular", rng, 20000) @ LUMINANCE
+        diff = mr.mitsuba_directional_albedo(material, o, "diffuse", rng, 5000) @ LUMINANCE
         model_spec = albedo * (gamma * (1 - r) + r / albedo) * g
         model_diff = albedo * (1 - gamma) * (1 - r)
         out.append((deg, spec / model_spec, diff / model_diff))
@@ -145,7 +130,7 @@ def main() -> None:
         print("  uniform sky, view angle: glossy part, diffuse part")
         rng = np.random.default_rng(0)
         for deg, spec, diff in sky_ratios(
-            mi, bsdf, gamma, albedo, alpha, [0, 30, 50, 60, 70, 75, 80, 85], rng
+            mat, gamma, albedo, alpha, [0, 30, 50, 60, 70, 75, 80, 85], rng
         ):
             print(f"    {deg:2d} deg  {spec:.2f}  {diff:.2f}")
 

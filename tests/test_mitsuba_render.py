@@ -72,6 +72,31 @@ def test_rough_plastic_tends_to_smooth_plastic_and_the_blend_ends():
     np.testing.assert_allclose(rd, 0.37, rtol=1e-4)
 
 
+def test_directional_albedo_by_sampling_is_the_integral_and_rises_at_grazing_views():
+    # Mitsuba's own sampling toward the normal against mitsuba_albedos' fixed
+    # quadrature of eval (4000 draws, seed 0). Measured 0.25 % apart (specular)
+    # and 0.16 % (diffuse); tolerance 3 % is several times the sampling noise,
+    # while a swapped component is off by a factor of 5 and a view ignored
+    # (next) by a factor of 3
+    material = mr.MitsubaMaterial("roughplastic", 0.3, int_ior=1.5, alpha=0.3)
+    rs, rd = mr.mitsuba_albedos(material)
+    rng = np.random.default_rng(0)
+    normal = np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(
+        mr.mitsuba_directional_albedo(material, normal, "specular", rng), rs, rtol=0.03
+    )
+    np.testing.assert_allclose(
+        mr.mitsuba_directional_albedo(material, normal, "diffuse", rng), rd, rtol=0.03
+    )
+    # the coating's Fresnel: at 80 deg the specular part is measured 3.25
+    # times its value along the normal (Fresnel's rise less the masking);
+    # over 2.5 times, where a view ignored gives 1
+    grazing = np.array([np.sin(np.radians(80.0)), 0.0, np.cos(np.radians(80.0))])
+    assert np.all(mr.mitsuba_directional_albedo(material, grazing, "specular", rng) > 2.5 * rs)
+    with pytest.raises(ValueError, match="part must be"):
+        mr.mitsuba_directional_albedo(material, normal, "glossy", rng)
+
+
 def test_material_validation_names_the_problem():
     with pytest.raises(ValueError, match="roughconductor"):
         mr.MitsubaMaterial("velvet")
