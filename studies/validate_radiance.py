@@ -440,20 +440,23 @@ CANDIDATE_ACTS = {
 
 
 def _same_as_default(path: Path, candidate: tuple | None) -> dict | None:
-    """The default's ``perez`` entry of this bundle, marked ``same_fit_as``,
-    where ``candidate`` (its name, the default's score folder) cannot change
-    it (:data:`CANDIDATE_ACTS`); None where it can, or the default has not
-    scored the bundle yet."""
+    """The default's score of this bundle: its ``perez`` entry, marked
+    ``same_fit_as``, with the bundle's description (truth, category, class,
+    ...; no other method), where ``candidate`` (its name, the default's score
+    folder) cannot change it (:data:`CANDIDATE_ACTS`); None where it can, or
+    the default has not scored the bundle yet."""
     if candidate is None:
         return None
     name, folder = candidate
     file = Path(folder) / f"{path.name}.json"
     if not file.exists():
         return None
-    entry = json.loads(file.read_text()).get("perez")
+    record = json.loads(file.read_text())
+    entry = record.get("perez")
     if entry is None or CANDIDATE_ACTS[name](entry):
         return None
-    return {**entry, "same_fit_as": "default"}
+    about = {k: v for k, v in record.items() if k not in METHODS}
+    return {**about, "perez": {**entry, "same_fit_as": "default"}}
 
 
 def _cached(
@@ -480,8 +483,8 @@ def _cached(
         out = dict((committed or {}).get(path.name, {}))
     todo = [m for m in methods if m in redo or m not in out]
     same = _same_as_default(path, candidate) if "perez" in todo else None
-    if same is not None:
-        out["perez"] = same
+    if same is not None:  # the bundle's description too: the summary reads it
+        out = {**same, **out, "perez": same["perez"]}
         todo.remove("perez")
     if todo:
         out = score_bundle(str(path), max_sweeps, todo, out)

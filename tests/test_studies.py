@@ -200,7 +200,9 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
     # the candidate's change cannot act (within-10: the equal-weights guard
     # did not act; in-lobe: no ggx-schlick fit), its answer is the default's,
     # marked; where it can act, or the default has not scored the bundle, it
-    # is fitted
+    # is fitted. The copy carries the bundle's description (truth, category)
+    # and no other method: a copied score lacking them broke the summary
+    # table of holdout 18's candidate runs (KeyError 'category')
     validate = study_module("validate_radiance")
     default = tmp_path / "default"
     default.mkdir()
@@ -210,15 +212,28 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
         "plain": {"median": 0.6, "flags": []},
     }
     for name, entry in entries.items():
-        (default / f"{name}.json").write_text(json.dumps({"perez": entry}))
+        record = {"perez": entry, "baseline": {"median": 0.1}, "truth": 0.55, "category": "c"}
+        (default / f"{name}.json").write_text(json.dumps(record))
 
     def same(name):
         return validate._same_as_default(tmp_path / "bundles" / name, ("within-10", default))
 
     assert same("tied") is None
-    assert same("stacked") == {**entries["stacked"], "same_fit_as": "default"}
-    assert same("plain")["median"] == 0.6
+    assert same("stacked") == {
+        "perez": {**entries["stacked"], "same_fit_as": "default"},
+        "truth": 0.55,
+        "category": "c",
+    }
+    assert same("plain")["perez"]["median"] == 0.6
     assert same("not-scored-yet") is None
+    # through the cache: the candidate's score file of a copied bundle
+    scores = tmp_path / "scores"
+    out = validate._cached(
+        tmp_path / "bundles" / "plain", 10, scores=scores, methods=("perez",),
+        candidate=("within-10", default),
+    )  # fmt: skip
+    assert (out["truth"], out["category"], "baseline" in out) == (0.55, "c", False)
+    assert json.loads((scores / "plain.json").read_text()) == out
     assert validate._same_as_default(tmp_path / "tied", None) is None
     # in-lobe: only where the lobe stack fitted ggx-schlick
     lobes = {"median": 0.5, "flags": [], "lobe_families": {"phong": {}, "ggx-schlick": {}}}
@@ -227,7 +242,9 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
     (default / "phong.json").write_text(json.dumps({"perez": phong}))
     bundles = tmp_path / "bundles"
     assert validate._same_as_default(bundles / "lobes", ("in-lobe", default)) is None
-    assert validate._same_as_default(bundles / "phong", ("in-lobe", default))["median"] == 0.7
+    assert (
+        validate._same_as_default(bundles / "phong", ("in-lobe", default))["perez"]["median"] == 0.7
+    )
 
 
 def test_validation_family_table_reads_the_default_method():
