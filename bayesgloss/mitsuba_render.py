@@ -6,7 +6,7 @@ camera, sky, ground, image size, camera response) with a Mitsuba material
 (:class:`MitsubaMaterial`): smooth ``plastic``, GGX ``roughplastic``, and a
 smooth ``conductor`` or GGX ``roughconductor`` blended with a Lambertian base
 through ``blendbsdf``, so that a metal's gloss can be below 1 (but see
-"Known limit" below). The config's
+"Smooth metals" below). The config's
 own Radiance material fields (``material``, ``colour``, ``specularity``,
 ``roughness``) and ``ambient`` are not used.
 
@@ -40,21 +40,22 @@ The frames then go through :func:`bayesgloss.sequences.camera_response` and
 (labels from :func:`~bayesgloss.sequences.label_image`, exposure written for
 ``linear-radiance`` only), into ``cache_dir/<name>-<hash>/``.
 
-Known limit
------------
-Mitsuba 3.9.1's ``blendbsdf`` weights a sample of a delta lobe (the smooth
-``conductor``) by the blend's mixture density, (1 - w) p_diffuse + w, not by
-w (its sampling fix of mitsuba3 PR #1681, right for two non-delta lobes):
-a plane of ``blendbsdf`` (w 0.1, diffuse 0.5, ideal mirror) under a uniform
-sky of radiance 1 renders a specular part of 0.028-0.053 for 0.1 and a
-diffuse part 9-31 % high (stop 35's diagnosis, 256 spp). So the smooth
-metals' frames hold less gloss than :func:`true_gloss` (which reads the
-BSDF's ``sample`` per component, a path without the fault) says. Read
-as the path tracer samples the blend (``studies/blend_truth.py``, stop
-52) the frames' gloss at normal incidence is 0.016 below the truth at
-w = 0.6 and up to 0.18 below at w = 0.05 (Mitsuba holdout 7's ms10: 0.092
-against 0.270), not the 0.005-0.02 this note first said. The rough
-conductors (no delta lobe) and the plastics are not affected.
+Smooth metals
+-------------
+A smooth metal (kind ``conductor``) is rendered as a GGX ``roughconductor``
+of roughness :data:`SMOOTH_CONDUCTOR_ALPHA` = 0.001, a lobe far narrower
+than the sun's disc (0.27 degrees) and than a pixel of the sky's map, with
+no delta lobe. Mitsuba 3.9.1's ``blendbsdf`` weights a sample of a delta
+lobe by the blend's mixture density, (1 - w) p_diffuse + w, not by w (its
+sampling fix of mitsuba3 PR #1681 is right for two non-delta lobes), so a
+blend of the smooth ``conductor`` rendered far less gloss than its
+components hold: at w = 0.054 the frames held 0.092 of gloss for a truth of
+0.270 (Mitsuba holdout 7's ms10; studies/README.md, stop 52). With the
+narrow lobe a blend of w = 0.1 renders 0.419 for a truth of 0.416 (the
+delta lobe: 0.212; ``tests/test_mitsuba_render.py``, :func:`rendered_gloss`).
+Sets drawn before stop 53 (Mitsuba holdouts 1-8) were rendered with the
+delta lobe; their smooth metals' truths are the components', and
+``studies/blend_truth.py`` reads what their frames hold.
 
 True gloss
 ----------
@@ -89,8 +90,10 @@ reflectance at incidence cosine c, ``F0 = ((eta - 1) / (eta + 1))^2``,
   over 64 equally spaced mu, doubled: 1-1.4 % below the integral, so its
   ``R_d`` is 1.3-2.7 % below that of an exact integral, and 2 % below smooth
   ``plastic``'s at alpha 0.002).
-- ``conductor`` blended: ``R_s = w F_c(1) = w ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2)``
-  per channel (complex index n + ik), ``R_d = (1 - w) rho``.
+- ``conductor`` blended: the ``roughconductor``'s below at alpha
+  :data:`SMOOTH_CONDUCTOR_ALPHA`, within 1e-5 of ``w F_c(1) = w ((n - 1)^2 +
+  k^2) / ((n + 1)^2 + k^2)`` per channel (complex index n + ik), ``R_d = (1
+  - w) rho``.
 - ``roughconductor`` blended: ``R_s = w 2 pi int F_c(cos t) D(t) G1(2 t) cos t sin t dt``,
   ``R_d = (1 - w) rho``.
 
@@ -143,7 +146,9 @@ __all__ = [
     "mitsuba_albedos",
     "model_albedos",
     "true_gloss",
+    "rendered_gloss",
     "gloss_of_albedos",
+    "SMOOTH_CONDUCTOR_ALPHA",
 ]
 
 #: Mitsuba's CPU variant used for rendering and for the BSDF integrals (the
@@ -176,6 +181,10 @@ MAX_DEPTH = 6
 ALPHA_RANGE = (0.001, 1.0)
 IOR_RANGE = (1.01, 3.0)
 _WEIGHTS = np.asarray(reflectance.LUMINANCE_WEIGHTS, dtype=float)
+
+#: GGX roughness of the lobe a smooth metal (kind ``conductor``) is rendered
+#: with, instead of Mitsuba's delta lobe (module docstring, "Smooth metals") [-].
+SMOOTH_CONDUCTOR_ALPHA = 0.001
 #: Points of roughplastic.cpp's tables (MI_ROUGH_TRANSMITTANCE_RES).
 _ROUGH_TABLE = 64
 
@@ -289,8 +298,15 @@ class MitsubaMaterial:
             raise ValueError(f"unknown mitsuba material field(s): {', '.join(unknown)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
+    @property
+    def lobe_alpha(self) -> float:
+        """The GGX roughness a metal is rendered with: its ``alpha``, or
+        :data:`SMOOTH_CONDUCTOR_ALPHA` for a smooth one."""
+        return float(SMOOTH_CONDUCTOR_ALPHA if self.kind == "conductor" else self.alpha)
+
     def bsdf(self) -> dict:
-        """The material as a Mitsuba scene-dictionary BSDF."""
+        """The material as a Mitsuba scene-dictionary BSDF (a smooth metal's
+        lobe: module docstring, "Smooth metals")."""
         rgb = _rgb(self.diffuse, "diffuse")
         diffuse = {"type": "rgb", "value": [float(v) for v in rgb]}
         if self.kind == "plastic":
@@ -309,9 +325,7 @@ class MitsubaMaterial:
                 "ext_ior": 1.0,
                 "diffuse_reflectance": diffuse,
             }
-        metal: dict = {"type": self.kind}
-        if self.kind == "roughconductor":
-            metal.update(distribution="ggx", alpha=float(self.alpha))
+        metal: dict = {"type": "roughconductor", "distribution": "ggx", "alpha": self.lobe_alpha}
         if self.conductor is not None:
             metal["material"] = self.conductor
         else:
@@ -393,13 +407,14 @@ def mitsuba_albedos(material: MitsubaMaterial) -> tuple[np.ndarray, np.ndarray]:
     mu, wmu = _gauss_legendre(64, 0.0, 1.0)
     theta_d = np.arccos(mu)
     r_diff = integrate(diff_index, theta_d, wmu / np.sin(theta_d))  # dmu = sin dtheta
-    if material.kind in ("plastic", "conductor"):  # a delta component: sample() gives its albedo
+    if material.kind == "plastic":  # a delta component: sample() gives its albedo
         ctx = mi.BSDFContext()
         ctx.component = spec_index
         _, weight = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
         r_spec = np.array(weight, dtype=float).reshape(3)
     else:
-        t, wt = _half_angle_nodes(material.alpha)
+        alpha = material.lobe_alpha if material.kind.endswith("conductor") else material.alpha
+        t, wt = _half_angle_nodes(alpha)
         r_spec = integrate(spec_index, 2 * t, 2 * wt)  # theta_o = 2 t
     return r_spec, r_diff
 
@@ -548,12 +563,9 @@ def model_albedos(material: MitsubaMaterial) -> tuple[np.ndarray, np.ndarray]:
     if material.kind.endswith("conductor"):
         eta, k = _conductor_ior(material)
         w = material.weight
-        if material.kind == "conductor":
-            r_spec = ((eta - 1) ** 2 + k**2) / ((eta + 1) ** 2 + k**2)
-        else:
-            r_spec = _lobe_albedo(
-                material.alpha, lambda c: _fresnel(c[:, None], eta[None, :], k[None, :])
-            )
+        r_spec = _lobe_albedo(
+            material.lobe_alpha, lambda c: _fresnel(c[:, None], eta[None, :], k[None, :])
+        )
         return w * r_spec, (1 - w) * rho
     eta = material.int_ior
     f0 = ((eta - 1) / (eta + 1)) ** 2
@@ -587,6 +599,51 @@ def gloss_of_albedos(r_specular, r_diffuse) -> float:
 def true_gloss(material: MitsubaMaterial) -> float:
     """The material's true gamma, from :func:`mitsuba_albedos` (Mitsuba's own BSDF) [-]."""
     return gloss_of_albedos(*mitsuba_albedos(material))
+
+
+def rendered_gloss(material: MitsubaMaterial, spp: int = 4096, bsdf: dict | None = None) -> float:
+    """The gloss Mitsuba's path tracer renders at normal incidence [-].
+
+    A square of the material seen straight down by a narrow camera under a
+    uniform sky of radiance 1 (:func:`envmap_directions`' grid, 256 x 129):
+    the pixels hold the specular and diffuse albedos together. Rendered again
+    with the sky black within 6 degrees of the zenith, the mirror direction,
+    they hold the diffuse albedo alone, less the cone's cosine-weighted share
+    sin^2(6 deg) (divided back out). A check of :func:`true_gloss` by the
+    renderer itself (module docstring, "Smooth metals"). ``bsdf``: a Mitsuba
+    BSDF dictionary to render instead of ``material.bsdf()``.
+    """
+    mi = _mitsuba()
+    directions = envmap_directions((256, 129))
+    camera = mi.ScalarTransform4f().look_at(origin=[0, 0, 1], target=[0, 0, 0], up=[0, 1, 0])
+
+    def render(hole: bool) -> float:
+        radiance = np.ones(directions.shape[:2])
+        if hole:
+            radiance[directions[..., 2] > np.cos(np.radians(6.0))] = 0.0
+        scene = {
+            "type": "scene",
+            "integrator": {"type": "path", "max_depth": 3},
+            "sensor": {
+                "type": "perspective",
+                "fov": 2.0,
+                "to_world": camera,
+                "film": {"type": "hdrfilm", "width": 4, "height": 4, "rfilter": {"type": "box"}},
+                "sampler": {"type": "independent", "sample_count": int(spp)},
+            },
+            "sky": _sky_emitter(radiance),
+            "plane": {
+                "type": "rectangle",
+                "to_world": mi.ScalarTransform4f().scale([0.5, 0.5, 1.0]),
+                "bsdf": material.bsdf() if bsdf is None else bsdf,
+            },
+        }
+        image = np.array(mi.render(mi.load_dict(scene))).reshape(-1, 3)
+        return float(image.mean(axis=0) @ _WEIGHTS)
+
+    total = render(False)
+    diffuse = render(True) / (1.0 - np.sin(np.radians(6.0)) ** 2)
+    return (total - diffuse) / total
 
 
 # -- scene -----------------------------------------------------------------------
@@ -927,6 +984,8 @@ class MitsubaSequence:
             "renderer": renderer_name(),
             "scene": [ENVMAP_SIZE, SUN_DISTANCE, MAX_DEPTH],
         }
+        if self.material.kind == "conductor":  # rendered with a narrow lobe since stop 53
+            d["smooth_conductor_alpha"] = SMOOTH_CONDUCTOR_ALPHA
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]
 
     def to_dict(self) -> dict:

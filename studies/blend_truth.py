@@ -2,7 +2,7 @@
 
 :mod:`bayesgloss.mitsuba_render` makes a smooth metal's gloss below 1 by
 ``blendbsdf`` of a ``conductor`` (a delta lobe) and a Lambertian base, and
-its "Known limit" says Mitsuba 3's ``blendbsdf`` weights a sample of the
+its "Smooth metals" says Mitsuba 3's ``blendbsdf`` weights a sample of the
 delta lobe by the blend's mixture density, not by the blend weight w. The
 bundle's truth (:func:`bayesgloss.mitsuba_render.true_gloss`) reads each
 component on its own, a path without the fault. This script reads the
@@ -22,6 +22,9 @@ the default's answer where the set is scored::
 ``holdout_rule.py --blend-truth`` reads.)
 
 A diagnosis on seen sets: the truth the sets are scored on is unchanged.
+Since stop 53 a smooth metal is rendered with a narrow GGX lobe instead
+(:mod:`bayesgloss.mitsuba_render`, "Smooth metals"); this script reads the
+blends as the sets drawn before then were rendered (:func:`delta_blend`).
 """
 
 import json
@@ -39,7 +42,7 @@ def sampled_gloss(material: mr.MitsubaMaterial, n: int = 20000, seed: int = 0) -
     """The delta lobe's share of the blend's sampled albedo at normal incidence [-]."""
     mi = mr._mitsuba()
     y = np.asarray(mr._WEIGHTS)
-    bsdf = mi.load_dict(material.bsdf())
+    bsdf = mi.load_dict(delta_blend(material))
     ctx = mi.BSDFContext()
     si = mi.SurfaceInteraction3f()
     si.wi = mi.Vector3f(0, 0, 1)
@@ -55,48 +58,22 @@ def sampled_gloss(material: mr.MitsubaMaterial, n: int = 20000, seed: int = 0) -
     return spec / (spec + diff)
 
 
+def delta_blend(material: mr.MitsubaMaterial) -> dict:
+    """The BSDF a smooth metal was rendered with before stop 53: the blend
+    with Mitsuba's smooth ``conductor`` (a delta lobe) in place of the narrow
+    GGX lobe :mod:`bayesgloss.mitsuba_render` renders it with now."""
+    bsdf = material.bsdf()
+    if material.kind == "conductor":
+        metal = {k: v for k, v in bsdf["bsdf_1"].items() if k not in ("distribution", "alpha")}
+        bsdf = {**bsdf, "bsdf_1": {**metal, "type": "conductor"}}
+    return bsdf
+
+
 def rendered_gloss(material: mr.MitsubaMaterial, spp: int = 4096) -> float:
-    """The gloss Mitsuba's path tracer renders at normal incidence [-].
-
-    A square of the material seen straight down by a narrow camera under
-    a uniform sky of radiance 1 (:func:`bayesgloss.mitsuba_render.envmap_directions`'
-    grid, 256 x 129): the pixels hold the specular and diffuse albedos
-    together. Rendered again with the sky black within 6 degrees of the
-    zenith, the mirror direction, they hold the diffuse albedo alone, less
-    the cone's cosine-weighted share sin^2(6 deg) (divided back out).
-    """
-    mi = mr._mitsuba()
-    y = np.asarray(mr._WEIGHTS)
-    directions = mr.envmap_directions((256, 129))
-
-    def render(hole: bool) -> float:
-        radiance = np.ones(directions.shape[:2])
-        if hole:
-            radiance[directions[..., 2] > np.cos(np.radians(6.0))] = 0.0
-        camera = mi.ScalarTransform4f().look_at(origin=[0, 0, 1], target=[0, 0, 0], up=[0, 1, 0])
-        scene = {
-            "type": "scene",
-            "integrator": {"type": "path", "max_depth": 3},
-            "sensor": {
-                "type": "perspective",
-                "fov": 2.0,
-                "to_world": camera,
-                "film": {"type": "hdrfilm", "width": 4, "height": 4, "rfilter": {"type": "box"}},
-                "sampler": {"type": "independent", "sample_count": spp},
-            },
-            "sky": mr._sky_emitter(radiance),
-            "plane": {
-                "type": "rectangle",
-                "to_world": mi.ScalarTransform4f().scale([0.5, 0.5, 1.0]),
-                "bsdf": material.bsdf(),
-            },
-        }
-        image = np.array(mi.render(mi.load_dict(scene))).reshape(-1, 3)
-        return float(image.mean(axis=0) @ y)
-
-    total = render(False)
-    diffuse = render(True) / (1.0 - np.sin(np.radians(6.0)) ** 2)
-    return (total - diffuse) / total
+    """The gloss the path tracer renders for the material as the sets of
+    stops 35-52 rendered it (:func:`delta_blend`,
+    :func:`bayesgloss.mitsuba_render.rendered_gloss`) [-]."""
+    return mr.rendered_gloss(material, spp, bsdf=delta_blend(material))
 
 
 def main(argv=None) -> None:
