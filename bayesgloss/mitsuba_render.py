@@ -300,8 +300,8 @@ class MitsubaMaterial:
 
     @property
     def lobe_alpha(self) -> float:
-        """The GGX roughness a metal is rendered with: its ``alpha``, or
-        :data:`SMOOTH_CONDUCTOR_ALPHA` for a smooth one."""
+        """The GGX roughness the glossy lobe is rendered with: the material's
+        ``alpha``, or :data:`SMOOTH_CONDUCTOR_ALPHA` for a smooth metal."""
         return float(SMOOTH_CONDUCTOR_ALPHA if self.kind == "conductor" else self.alpha)
 
     def bsdf(self) -> dict:
@@ -413,8 +413,7 @@ def mitsuba_albedos(material: MitsubaMaterial) -> tuple[np.ndarray, np.ndarray]:
         _, weight = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
         r_spec = np.array(weight, dtype=float).reshape(3)
     else:
-        alpha = material.lobe_alpha if material.kind.endswith("conductor") else material.alpha
-        t, wt = _half_angle_nodes(alpha)
+        t, wt = _half_angle_nodes(material.lobe_alpha)
         r_spec = integrate(spec_index, 2 * t, 2 * wt)  # theta_o = 2 t
     return r_spec, r_diff
 
