@@ -19,7 +19,9 @@ sunless ones for (d), all for (e)):
 A rule's own condition (f), a named test passing on the candidate, is run
 by hand. Reported beside the rule, as every rule asks: per set, per
 material class, per sky type, per facet count (1-3, more) and
-``not-converged``.
+``not-converged``; the median width of the reported intervals; and the
+sequences the candidate fitted (not copied from the default) on their
+own, per set and class, with each lobe family's weight and MAE there.
 
 A sequence counts only where both methods scored it, and the script says
 how many each set has of how many bundles, so a rule is never read on a
@@ -50,7 +52,7 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
 # the same tests of a score as validate_radiance's tables
-from validate_radiance import SETS, confident_miss, overcast_ok  # noqa: E402
+from validate_radiance import SETS, confident_miss, overcast_ok, reported_interval  # noqa: E402
 from validate_radiance import _holds as holds  # noqa: E402
 
 
@@ -66,9 +68,11 @@ def method_figures(scores: list[dict], method: str) -> dict:
     sun = [s for s in scores if s["direct_sun"]]
     sunless = [s for s in scores if not s["direct_sun"]]
     err = [abs(s[method]["median"] - s["truth"]) for s in sun]
+    widths = [np.ptp(reported_interval(s[method])) for s in sun]
     return {
         "sun_lit": len(sun),
         "mae": float(np.mean(err)) if err else None,
+        "median_width": float(np.median(widths)) if widths else None,
         "held": sum(holds(s[method], s["truth"]) for s in sun),
         "confident_misses": [s["bundle"][:4] for s in sun if confident_miss(s[method], s["truth"])],
         "sunless": len(sunless),
@@ -78,6 +82,13 @@ def method_figures(scores: list[dict], method: str) -> dict:
         else None,
         "not_converged": sum("not-converged" in s[method].get("flags", []) for s in scores),
     }
+
+
+def candidate_fit(score: dict, candidate: str) -> str:
+    """Whether the candidate fitted this sequence or copied the default's
+    answer (``validate_radiance.py --candidate`` marks a copy
+    ``same_fit_as``): only the fitted ones can move."""
+    return "copied" if score[candidate].get("same_fit_as") else "fitted"
 
 
 def rule(
@@ -90,7 +101,12 @@ def rule(
 ) -> dict:
     """Conditions (a)-(e) of the module docstring, pooled over ``sets`` (name:
     scores holding both methods), with each set's figures beside them."""
-    pooled = [s for scores in sets.values() for s in scores]
+    named = [(name, s) for name, scores in sets.items() for s in scores]
+    pooled = [s for _, s in named]
+    fitted: dict[str, list[dict]] = {}  # the sequences the candidate fitted, by set and class
+    for name, s in named:
+        if candidate_fit(s, candidate) == "fitted":
+            fitted.setdefault(f"{name}, {s.get('class') or 'none'}", []).append(s)
     d, c = method_figures(pooled, default), method_figures(pooled, candidate)
     per_set = {
         name: {m: method_figures(scores, m) for m in (default, candidate)}
@@ -128,9 +144,46 @@ def rule(
                 ("class", lambda s: s.get("class") or "none"),
                 ("sky type", lambda s: s["category"]),
                 ("facet count", facet_count),
+                ("candidate's fit", lambda s: candidate_fit(s, candidate)),
             )
+        }
+        | {
+            "fitted, per set and class": {
+                group: {m: method_figures(rows, m) for m in (default, candidate)}
+                for group, rows in sorted(fitted.items())
+            }
         },
+        "lobe_families": lobe_family_figures(named, default, candidate),
     }
+
+
+def lobe_family_figures(named: list[tuple[str, dict]], default: str, candidate: str) -> dict:
+    """Per set and class, over the sequences the candidate fitted where both
+    methods stacked lobe families: each family's median weight, and the MAE
+    of its own fit's object gamma, for each method (what a rule about one
+    lobe family reports beside it)."""
+    out: dict[str, dict] = {}
+    for name, s in named:
+        if candidate_fit(s, candidate) != "fitted" or not s["direct_sun"]:
+            continue
+        stacks = {m: s[m].get("lobe_families") or {} for m in (default, candidate)}
+        if not all(stacks.values()):
+            continue
+        group = out.setdefault(f"{name}, {s.get('class') or 'none'}", {"n": 0})
+        group["n"] += 1
+        for m, stack in stacks.items():
+            for family, fit in stack.items():
+                row = group.setdefault(m, {}).setdefault(family, {"weight": [], "error": []})
+                row["weight"].append(fit["weight"])
+                row["error"].append(abs(fit["gamma"]["median"] - s["truth"]))
+    for group in out.values():
+        for m in (default, candidate):
+            for family, row in group.get(m, {}).items():
+                group[m][family] = {
+                    "median_weight": float(np.median(row["weight"])),
+                    "mae": float(np.mean(row["error"])),
+                }
+    return dict(sorted(out.items()))
 
 
 def _groups(scores, by) -> dict[str, list[dict]]:
@@ -174,8 +227,9 @@ def with_blend_truth(scores: list[dict], sampled: dict) -> list[dict]:
 
 def _line(name: str, fig: dict) -> str:
     mae = "-" if fig["mae"] is None else f"{fig['mae']:.3f}"
+    width = "-" if fig["median_width"] is None else f"{fig['median_width']:.2f}"
     return (
-        f"  {name:<16} MAE {mae}  held {fig['held']}/{fig['sun_lit']}"
+        f"  {name:<16} MAE {mae}  held {fig['held']}/{fig['sun_lit']}  width {width}"
         f"  confident misses {len(fig['confident_misses'])} {fig['confident_misses']}"
         f"  overcast {fig['overcast_ok']}/{fig['sunless']}"
         f"  median s {fig['median_seconds']:.0f}  not-converged {fig['not_converged']}"
@@ -229,6 +283,15 @@ def main(argv=None) -> dict:
             print(f" {group}")
             for m in methods:
                 print(_line(m, figs[m]))
+    if out["lobe_families"]:
+        print("lobe families where the candidate fitted (median weight, MAE of the family's fit):")
+        for group, figs in out["lobe_families"].items():
+            print(f" {group} (n {figs['n']})")
+            for m in methods:
+                fams = "  ".join(
+                    f"{f} {v['median_weight']:.2f}/{v['mae']:.3f}" for f, v in figs[m].items()
+                )
+                print(f"  {m:<16} {fams}")
     if args.blend_truth:
         blended = {}
         for name, scores in sets.items():

@@ -353,6 +353,32 @@ def test_holdout_rule_pools_sets_and_refuses_a_set_much_worse():
     assert not hr.rule({"one": slow}, "d", "c")["conditions"]["e"]
 
 
+def test_holdout_rule_reports_the_sequences_the_candidate_fitted_on_their_own():
+    # a copied score (same_fit_as) cannot move, so the rule reports the fitted
+    # ones apart, per set and class, with each lobe family's weight and own
+    # error there; a grouping that mixed in the copy would give MAE 0.05
+    hr = study_module("holdout_rule")
+    fitted = _rule_score("ms00", 0.5, True, (0.60, 0.55, 0.65, 100), (0.52, 0.40, 0.60, 110))
+    copied = _rule_score("ms01", 0.3, True, (0.30, 0.20, 0.40, 100), (0.30, 0.20, 0.40, 100))
+    copied["c"]["same_fit_as"] = "default"
+    for m, weight, gamma in (("d", 0.2, 0.62), ("c", 0.7, 0.51)):
+        fitted[m]["lobe_families"] = {
+            "phong": {"weight": 1 - weight, "gamma": {"median": 0.60}},
+            "ggx-schlick": {"weight": weight, "gamma": {"median": gamma}},
+        }
+    out = hr.rule({"m": [fitted, copied]}, "d", "c")
+    groups = out["beside"]["candidate's fit"]
+    assert groups["fitted"]["d"]["mae"] == pytest.approx(0.1)
+    assert groups["copied"]["c"]["mae"] == pytest.approx(0.0)
+    assert list(out["beside"]["fitted, per set and class"]) == ["m, rough-metal"]
+    lobes = out["lobe_families"]["m, rough-metal"]
+    assert lobes["n"] == 1
+    assert lobes["c"]["ggx-schlick"]["median_weight"] == pytest.approx(0.7)
+    assert lobes["d"]["ggx-schlick"]["mae"] == pytest.approx(0.12)
+    # the reported interval's median width, over the sun-lit sequences
+    assert out["pooled"]["d"]["median_width"] == pytest.approx(0.15)
+
+
 def test_holdout_rule_reads_holdout16_as_stop_49_decided(tmp_path):
     # stop 49's decision on the committed scores: sun-lit MAE 0.067 -> 0.052,
     # held 16/18 -> 17/18, one confident miss each, overcast 4/6 -> 5/6, 1.09x;
