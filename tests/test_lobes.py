@@ -207,24 +207,25 @@ def test_stacking_names_the_generating_lobe_family(tmp_path, family, exponent, g
 
 def _coated_bundle(path, gamma, albedo, exponent, seed=2):
     """A forward-model bundle of a dielectric coating over a diffuse base:
-    the GGX lobe at the Phong-equivalent ``exponent``, Schlick's rise on the
-    glossy part and the coating's (1 - F) on the diffuse part, in and out
-    (:mod:`bayesgloss.fresnel`'s model at strength 1), normal-incidence
-    albedo ``albedo``; 2 % relative noise."""
+    the GGX lobe at the Phong-equivalent ``exponent`` with Schlick's rise
+    inside it (each light's own half vector, G^S), the coating's (1 - F) at
+    the view and the sun's incidence on the diffuse part
+    (:func:`bayesgloss.fresnel.fresnel_parts_in_lobe` at strength 1), the
+    normal-incidence albedo ``albedo``; 2 % relative noise."""
     from conftest import make_synthetic_bundle
 
     from bayesgloss import fresnel
 
     def radiance(geom, sky):
-        fb = lobes.facet_bases(geom, sky, [exponent, exponent * 1.0001], family="ggx")
-        glossy = fb.glossy[:, 0]
+        pair = [exponent, exponent * 1.0001]
+        fb = lobes.facet_bases(geom, sky, pair, family="ggx")
+        glossy, rise = fb.glossy[:, 0], lobes.ggx_schlick_rise_basis(geom, sky, pair)[:, 0]
         terms = fresnel.fresnel_terms(
             geom, *render._sun_terms(sky), model="schlick"
         )  # F at the view, and the direct sun's diffuse basis times F at its incidence
-        f = terms.view[:, None]
-        unit = (1 - f) * ((1 - gamma) * fb.diffuse + gamma * glossy) + f / albedo * glossy
-        unit -= (1 - f) * (1 - gamma) * terms.sun_direct
-        return albedo * unit
+        transmitted = (1 - terms.view[:, None]) * (1 - gamma)
+        unit = transmitted * (fb.diffuse - terms.sun_direct) + gamma * (glossy - rise)
+        return albedo * unit + rise  # glossy: F0 G + (1 - F0) G^S, F0 = A gamma
 
     return make_synthetic_bundle(path, noise=0.02, seed=seed, radiance=radiance)
 
@@ -233,19 +234,26 @@ def test_stacking_the_materials_names_a_dielectric_coating(tmp_path):
     # F0 0.04 over a diffuse base of 0.25 (gamma 0.04 / (0.04 + 0.96 x 0.25)
     # = 0.143, A 0.28), a GGX lobe of Phong-equivalent n 400, seen on the
     # 16-facet object under a named clear sky at 2 % noise: the lobes without
-    # the Fresnel rise take it for gloss (in a trial Phong read 0.59, GGX
-    # alone 0.47; the coating's PSIS-LOO 220 nats above theirs), so the
+    # the Fresnel rise take it for gloss (at stop 55 Phong read 0.60, GGX
+    # alone 0.48; the coating's PSIS-LOO 213 nats above theirs), so the
     # coating's weight must be near 1 and its gamma within 0.015 (it read
-    # 0.150 [0.144, 0.157]: the GGX table interpolated between its nodes of
-    # n and a 600-sweep run), the reported interval holding the truth; the
-    # summary names each fit's lobe and Fresnel model
+    # 0.151 [0.145, 0.158]: the GGX tables interpolated between their nodes
+    # of n and a 600-sweep run), the reported interval holding the truth; the
+    # summary names each fit's lobe and Fresnel model (the rise inside the
+    # lobe since stop 55; data made with the view's rise read 0.162)
     gamma, albedo = 0.04 / (0.04 + 0.96 * 0.25), 0.04 + 0.96 * 0.25
     path = _coated_bundle(tmp_path / "coated", gamma, albedo, 400.0)
     s = _stacked_under_clear_sky(path, lobe="materials").summary
     assert list(s["lobe_families"]) == ["phong", "ward", "ggx", "ggx-schlick"]
     assert s["lobe_families"]["ggx-schlick"]["weight"] > 0.95
-    assert s["lobe_families"]["ggx-schlick"]["fresnel"] == "schlick"
-    assert s["lobe_family"] == "ggx-schlick" and s["fresnel"] == "schlick"
+    assert s["lobe_families"]["ggx-schlick"]["fresnel"] == "schlick-lobe"
+    assert s["lobe_family"] == "ggx-schlick" and s["fresnel"] == "schlick-lobe"
+    # each fit with a Fresnel model reports its strength k and albedo A: the
+    # data were made at k = 1, A = 0.28 (k's prior is uniform on [0, 1]; it
+    # read 0.97 [0.93, 1.00]; A in its place, near 0.28, would fail)
+    k = s["lobe_families"]["ggx-schlick"]["fresnel_strength"]
+    assert k["q95"] > 0.95 and k["median"] > 0.85
+    assert "fresnel_strength" not in s["lobe_families"]["ggx"]
     assert abs(s["object"]["gamma_within_model"]["median"] - gamma) < 0.015
     lo, hi = s["object"]["gamma"]["hdi90"]
     assert lo <= gamma <= hi

@@ -387,20 +387,22 @@ def test_high_k_share_weighs_each_fit_by_its_stacking_weight():
     assert sky_families.equal_when_unreliable(scores) is scores
 
 
-def test_equal_weights_leave_out_the_fits_beyond_doubt_behind():
-    # holdout 13's candidate: 60 nats and 6 standard errors behind the best
-    # is beyond the screen's margin (50 nats and 5 se): weight 0; 60 nats at
-    # 20 se (100 nats needed) and 40 nats at 1 se (50 needed) stay in
+def test_equal_weights_go_to_the_fits_within_ten_nats_of_the_best():
+    # holdout 18's candidate (tied-within-10): where the guard acts, the fits
+    # within UNRELIABLE_NEAR_NATS = 10 nats of the best share the weight,
+    # whatever the standard error; 40 nats at 1 se and 60 at 20 se, which
+    # the old margin (50 nats and 5 se) kept in the running, are out
     row = {"high_k": 30, "entries": 100}
     scores = {
-        "a": {**row, "weight": 0.7, "elpd_diff": 0.0, "dse": 0.0},
+        "a": {**row, "weight": 0.6, "elpd_diff": 0.0, "dse": 0.0},
         "b": {**row, "weight": 0.0, "elpd_diff": 60.0, "dse": 10.0},
         "c": {**row, "weight": 0.2, "elpd_diff": 60.0, "dse": 20.0},
         "d": {**row, "weight": 0.1, "elpd_diff": 40.0, "dse": 1.0},
+        "e": {**row, "weight": 0.1, "elpd_diff": 8.0, "dse": 1.0},
     }
     equal = sky_families.equal_when_unreliable(scores)
-    assert [equal[n]["weight"] for n in "abcd"] == pytest.approx([1 / 3, 0.0, 1 / 3, 1 / 3])
-    assert [equal[n]["stacking_weight"] for n in "abcd"] == [0.7, 0.0, 0.2, 0.1]
+    assert [equal[n]["weight"] for n in "abcde"] == pytest.approx([0.5, 0.0, 0.0, 0.0, 0.5])
+    assert [equal[n]["stacking_weight"] for n in "abcde"] == [0.6, 0.0, 0.2, 0.1, 0.1]
 
 
 def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
@@ -420,7 +422,8 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
     assert sky_families.stack_flags(kept) == ["loo-unreliable"]
     assert kept["families"]["gensky-clear"]["weight"] > 0.5  # the most, though noisy
 
-    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
+    # 0.5 nat an entry over 12 entries: all four within 10 nats of the best
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.5}, spread)
     idata, _, _, equal = sky_families.fit_families(
         *args, unreliable_loo="equal", perez_families=False
     )
@@ -432,6 +435,12 @@ def test_unreliable_loo_gives_the_families_equal_weights(monkeypatch):
     gamma = idata.posterior["gamma_object"].values
     shares = [np.mean(gamma.round(9) == g) for g in (0.1, 0.2, 0.3, 0.4)]
     np.testing.assert_allclose(shares, 0.25, atol=0.08)  # 100 draws: sd of a share 0.04
+    # 1 nat an entry: the others 12 nats behind, the clear sky alone answers
+    _fake_family_fits(monkeypatch, {"gensky-clear": -5.0}, spread)
+    _, _, _, alone = sky_families.fit_families(*args, unreliable_loo="equal", perez_families=False)
+    assert alone["equal_weights"]
+    weights = {n: f["weight"] for n, f in alone["families"].items()}
+    assert weights == {n: float(n == "gensky-clear") for n in sky_families.FAMILIES}
 
     # reliable entries (sd 0.05 over the draws: k well below 0.7): "equal"
     # keeps the stacking weights, no flag

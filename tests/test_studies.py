@@ -398,6 +398,32 @@ def test_holdout_rule_reads_holdout16_as_stop_49_decided(tmp_path):
     assert round(out["speed_ratio"], 2) == 1.09 and out["met"]
 
 
+@pytest.mark.parametrize(
+    ("candidate", "mae", "seconds"), [("within-10", 0.049, 0.84), ("in-lobe", 0.055, 0.97)]
+)
+def test_holdout_rule_reads_holdout18_and_mitsuba8_as_stop_55_decided(candidate, mae, seconds):
+    # stop 55's decisions on the committed scores, pooled over 39 sun-lit
+    # and 9 sunless: the default 0.057, 38/39 held, one confident miss
+    # (ms00), overcast 5/9; each candidate as good or better on each, so
+    # both met; within-10 fitted 16 sun-lit sequences (0.080 -> 0.060)
+    hr = study_module("holdout_rule")
+    out = hr.main(
+        ["--set", "validation_holdout18", "--set", "mitsuba_holdout8", "--candidate", candidate]
+    )
+    d, c = out["pooled"]["perez"], out["pooled"][candidate]
+    assert (d["sun_lit"], d["sunless"]) == (39, 9)
+    assert round(d["mae"], 3) == 0.057 and round(c["mae"], 3) == mae
+    assert d["held"] == c["held"] == 38
+    assert d["confident_misses"] == c["confident_misses"] == ["ms00"]
+    assert d["overcast_ok"] == c["overcast_ok"] == 5
+    assert round(out["speed_ratio"], 2) == seconds and out["met"]
+    if candidate == "within-10":
+        fitted = out["beside"]["candidate's fit"]["fitted"]
+        assert fitted[candidate]["sun_lit"] == 16
+        assert round(fitted["perez"]["mae"], 3) == 0.080
+        assert round(fitted[candidate]["mae"], 3) == 0.060
+
+
 def test_blend_truth_reads_the_blend_as_the_path_tracer_samples_it():
     # a smooth metal blended with a diffuse base: with w = 1 every sample is
     # the delta lobe (gloss 1); with w = 0.1 Mitsuba's blendbsdf weights the
