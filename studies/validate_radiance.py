@@ -70,6 +70,7 @@ SETS = {
     "validation_holdout16": "validation_holdout16",
     "validation_holdout17": "validation_holdout17",
     "validation_holdout18": "validation_holdout18",
+    "validation_holdout19": "validation_holdout19",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -79,6 +80,7 @@ SETS = {
     "mitsuba_holdout6": "validation_mitsuba_holdout6",
     "mitsuba_holdout7": "validation_mitsuba_holdout7",
     "mitsuba_holdout8": "validation_mitsuba_holdout8",
+    "mitsuba_holdout9": "validation_mitsuba_holdout9",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -144,7 +146,9 @@ ESTIMATES = {
     "clipped": {**FOUR_SKY_FAMILIES, "lobe": "materials", "clipped": "likelihood"},
     # the default since stop 43: the lobe stack, the clear-sky Perez shapes in the sky's stack
     # (bayesgloss.sky_families.PEREZ_FAMILIES); since stop 45 with no weight for the sky
-    # families beyond doubt behind where PSIS-LOO is unreliable (holdout 13's "equal-near")
+    # families beyond doubt behind where PSIS-LOO is unreliable (holdout 13's "equal-near");
+    # estimate's own defaults since: the day-level exposure (47), the convex ground
+    # shadow (49), within-10 and the coating's rise inside the lobe (55)
     "perez": {
         "per_frame": True,
         "illumination": "families",
@@ -166,6 +170,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout6": ("baseline", "perez", "ground-shadow"),
     "mitsuba_holdout7": ("baseline", "perez"),  # and radiance-ward, merged
     "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, in-lobe, merged
+    "mitsuba_holdout9": ("baseline", "perez"),  # the default after stop 55, measured
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -181,6 +186,7 @@ DEFAULT_METHODS = {
     "validation_holdout16": ("baseline", "perez", "ground-shadow"),
     "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
     "validation_holdout18": ("baseline", "perez"),  # and within-10, in-lobe, merged
+    "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
 }
 
 
