@@ -101,12 +101,8 @@ def rule(
 ) -> dict:
     """Conditions (a)-(e) of the module docstring, pooled over ``sets`` (name:
     scores holding both methods), with each set's figures beside them."""
-    named = [(name, s) for name, scores in sets.items() for s in scores]
-    pooled = [s for _, s in named]
-    fitted: dict[str, list[dict]] = {}  # the sequences the candidate fitted, by set and class
-    for name, s in named:
-        if candidate_fit(s, candidate) == "fitted":
-            fitted.setdefault(f"{name}, {s.get('class') or 'none'}", []).append(s)
+    pooled = [s for scores in sets.values() for s in scores]
+    fitted = fitted_by_set_and_class(sets, candidate)
     d, c = method_figures(pooled, default), method_figures(pooled, candidate)
     per_set = {
         name: {m: method_figures(scores, m) for m in (default, candidate)}
@@ -138,52 +134,58 @@ def rule(
         "beside": {
             key: {
                 group: {m: method_figures(rows, m) for m in (default, candidate)}
-                for group, rows in _groups(pooled, by).items()
+                for group, rows in groups.items()
             }
-            for key, by in (
-                ("class", lambda s: s.get("class") or "none"),
-                ("sky type", lambda s: s["category"]),
-                ("facet count", facet_count),
-                ("candidate's fit", lambda s: candidate_fit(s, candidate)),
+            for key, groups in (
+                ("class", _groups(pooled, lambda s: s.get("class") or "none")),
+                ("sky type", _groups(pooled, lambda s: s["category"])),
+                ("facet count", _groups(pooled, facet_count)),
+                ("candidate's fit", _groups(pooled, lambda s: candidate_fit(s, candidate))),
+                ("fitted, per set and class", fitted),
             )
-        }
-        | {
-            "fitted, per set and class": {
-                group: {m: method_figures(rows, m) for m in (default, candidate)}
-                for group, rows in sorted(fitted.items())
-            }
         },
-        "lobe_families": lobe_family_figures(named, default, candidate),
+        "lobe_families": lobe_family_figures(fitted, (default, candidate)),
     }
 
 
-def lobe_family_figures(named: list[tuple[str, dict]], default: str, candidate: str) -> dict:
-    """Per set and class, over the sequences the candidate fitted where both
-    methods stacked lobe families: each family's median weight, and the MAE
-    of its own fit's object gamma, for each method (what a rule about one
-    lobe family reports beside it)."""
-    out: dict[str, dict] = {}
-    for name, s in named:
-        if candidate_fit(s, candidate) != "fitted" or not s["direct_sun"]:
-            continue
-        stacks = {m: s[m].get("lobe_families") or {} for m in (default, candidate)}
-        if not all(stacks.values()):
-            continue
-        group = out.setdefault(f"{name}, {s.get('class') or 'none'}", {"n": 0})
-        group["n"] += 1
-        for m, stack in stacks.items():
-            for family, fit in stack.items():
-                row = group.setdefault(m, {}).setdefault(family, {"weight": [], "error": []})
-                row["weight"].append(fit["weight"])
-                row["error"].append(abs(fit["gamma"]["median"] - s["truth"]))
-    for group in out.values():
-        for m in (default, candidate):
-            for family, row in group.get(m, {}).items():
-                group[m][family] = {
-                    "median_weight": float(np.median(row["weight"])),
-                    "mae": float(np.mean(row["error"])),
-                }
+def fitted_by_set_and_class(sets: dict[str, list[dict]], candidate: str) -> dict:
+    """The sequences the candidate fitted (:func:`candidate_fit`), grouped
+    as ``"<set>, <class>"``, in order."""
+    out: dict[str, list[dict]] = {}
+    for name, scores in sets.items():
+        for s in scores:
+            if candidate_fit(s, candidate) == "fitted":
+                out.setdefault(f"{name}, {s.get('class') or 'none'}", []).append(s)
     return dict(sorted(out.items()))
+
+
+def lobe_family_figures(fitted: dict[str, list[dict]], methods: tuple[str, str]) -> dict:
+    """Per group of :func:`fitted_by_set_and_class`, over its sun-lit
+    sequences where both ``methods`` stacked lobe families: each family's
+    median weight, and the MAE of its own fit's object gamma, for each
+    method (what a rule about one lobe family reports beside it)."""
+    out: dict[str, dict] = {}
+    for group, scores in fitted.items():
+        rows = [
+            s for s in scores if s["direct_sun"] and all(s[m].get("lobe_families") for m in methods)
+        ]
+        if not rows:
+            continue
+        out[group] = {"n": len(rows)}
+        for m in methods:
+            families = dict.fromkeys(f for s in rows for f in s[m]["lobe_families"])
+            out[group][m] = {}
+            for family in families:
+                fits = [
+                    (s[m]["lobe_families"][family], s["truth"])
+                    for s in rows
+                    if family in s[m]["lobe_families"]
+                ]
+                out[group][m][family] = {
+                    "median_weight": float(np.median([fit["weight"] for fit, _ in fits])),
+                    "mae": float(np.mean([abs(fit["gamma"]["median"] - t) for fit, t in fits])),
+                }
+    return out
 
 
 def _groups(scores, by) -> dict[str, list[dict]]:
