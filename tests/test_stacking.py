@@ -87,6 +87,82 @@ def test_a_sky_not_identified_leaves_the_part_unstacked(monkeypatch):
     assert stacked.record("k", {}, "b", stacked.best)["stacked"] is True
 
 
+def test_a_tied_choice_answers_under_every_tied_sky(monkeypatch):
+    # with tied_sky_choice, where the sky families share their weight
+    # equally, that choice is fitted under each family of nonzero weight
+    # (not under the zero-weight one) and the answer is their mixture with
+    # the sky's weights: each tied sky's gamma keeps about its share of the
+    # draws (2 x 50 draws split multinomially: 0.5 +- 0.2 is beyond 4 sd),
+    # the sky's record stays, and each tied fit's own gamma is recorded. A
+    # sunless day keeps the default alone, and so does a sky that was
+    # identified (every choice then fitted under the most-weighted family)
+    import arviz as az
+
+    weights = {"gensky-clear": 0.5, "perez": 0.5, "gensky-overcast": 0.0}
+
+    def fake_families(*args, **kwargs):
+        post = {"gamma_object": np.full((2, 50), 0.9), "n_object": np.ones((2, 50))}
+        idata = az.from_dict(posterior=post, log_likelihood={"y": np.full((2, 50, 3, 4), -6.0)})
+        idata.posterior.attrs.update(
+            sky_family_weights=json.dumps(weights),
+            sky_family_most_weight=sky,
+            sky_family_equal_weights=int(equal),
+        )
+        samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+        return idata, samples, None, {"most_weight": sky, "equal_weights": equal, "seconds": 4.0}
+
+    own_gamma = {"gensky-clear": 0.2, "perez": 0.6, "gensky-overcast": 0.4}
+    calls = []
+
+    def fake_fit(b, curves, y, usable, censored, keep, name, seed, options, *rest, **kw):
+        calls.append((name, options["lobe_family"]))
+        post = {"gamma_object": np.full((2, 50), own_gamma[name]), "n_object": np.ones((2, 50))}
+        ll = -6.0 + 0.05 * np.random.default_rng(3).standard_normal((2, 50, 3, 4))
+        idata = az.from_dict(posterior=post, log_likelihood={"y": ll})
+        return idata, SimpleNamespace(seconds=2.0, facets=SimpleNamespace(seconds=0.0)), None
+
+    monkeypatch.setattr(sky_families, "fit_families", fake_families)
+    monkeypatch.setattr(stacking, "joint_fit", fake_fit)
+    monkeypatch.setattr(stacking, "add_facet_posteriors", lambda *args: None)
+    args = (*(None,) * 6, "families", 0, {})
+    kw = dict(option="lobe_family", default="phong", attribute="lobe_family")
+    choices = {"phong": "phong", "ward": "ward", "ggx": "ggx"}
+    sky, equal = "perez", True
+    tied = stacking.fit_stacked(*args, choices=choices, tied_sky_choice="ggx", **kw)
+    assert sorted(calls) == [("gensky-clear", "ggx"), ("perez", "ggx")]
+    assert list(tied.own) == ["ggx"] and tied.best == "ggx"
+    gamma = tied.idata.posterior["gamma_object"].values.ravel()
+    assert set(np.round(gamma, 6)) == {0.2, 0.6}
+    assert abs(np.mean(gamma == 0.2) - 0.5) < 0.2
+    attrs = tied.idata.posterior.attrs
+    assert json.loads(attrs["sky_family_weights"]) == weights
+    assert attrs["sky_family_equal_weights"] == 1
+    answer = tied.sky["tied_sky_answer"]
+    assert answer["choice"] == "ggx" and set(answer["families"]) == {"gensky-clear", "perez"}
+    assert answer["families"]["perez"]["gamma"]["median"] == pytest.approx(0.6)
+    assert tied.seconds == pytest.approx(4.0 + 2 * 2.0)  # the sky's fits, then the two tied
+    calls.clear()
+    sky = "gensky-overcast"  # sunless: the default alone
+    alone = stacking.fit_stacked(
+        *args, choices=choices, tied_sky_choice="ggx", sunless_default=True, **kw
+    )
+    assert calls == [] and list(alone.own) == ["phong"]
+    sky, equal = "perez", False  # the sky identified: every choice under it, stacked
+    stacked = stacking.fit_stacked(*args, choices=choices, tied_sky_choice="ggx", **kw)
+    assert calls == [("perez", "ward"), ("perez", "ggx")] and len(stacked.own) == 3
+
+
+def test_the_coating_answers_tied_skies_only_in_the_materials_stack():
+    from bayesgloss import lobe_families
+
+    assert lobe_families.TIED_SKY_LOBES["coating"] == "ggx-schlick"
+    assert lobe_families.MATERIAL_FAMILIES["ggx-schlick"] == ("ggx", "schlick-lobe")
+    with pytest.raises(ValueError, match="needs lobe 'materials'"):
+        lobe_families.fit_lobe_families(*(None,) * 6, "families", 0, {}, tied_sky_lobe="coating")
+    with pytest.raises(ValueError, match="unknown tied-sky lobe"):
+        lobe_families.fit_lobe_families(*(None,) * 6, "families", 0, {}, tied_sky_lobe="ward")
+
+
 def test_a_sunless_day_leaves_the_lobes_unstacked(monkeypatch):
     # with sunless_default (the lobe families'), a day whose most-weighted
     # sky family is an overcast one, or a named overcast sky, is answered by
