@@ -259,7 +259,6 @@ def _estimate(args: argparse.Namespace) -> int:
         unreliable_loo=args.unreliable_loo or "equal",
         ground_shadow=args.ground_shadow,
         clipped=args.clipped,
-        tied_sky_lobe=args.tied_sky_lobe,
     )
     if not args.quiet:
         print(file=sys.stderr)
@@ -399,7 +398,6 @@ def _estimate_many(args, progress) -> int:
                 **({"unreliable_loo": args.unreliable_loo} if args.unreliable_loo else {}),
                 **({"ground_shadow": args.ground_shadow} if args.ground_shadow else {}),
                 **({"clipped": args.clipped} if args.clipped else {}),
-                **({"tied_sky_lobe": args.tied_sky_lobe} if args.tied_sky_lobe else {}),
                 "bundle_content": content,
             },
         )
@@ -563,7 +561,6 @@ def _parser() -> argparse.ArgumentParser:
     from .fresnel import FRESNEL_MODELS
     from .ground_facing import DEFAULT_GROUND_FACING, GROUND_FACING_MODES, GROUND_FACING_NZ
     from .joint_estimate import CLIPPED, DEFAULT_FRESNEL
-    from .lobe_families import TIED_SKY_LOBES
     from .lobes import LOBE_FAMILIES
     from .object_shadow import GROUND_SHADOWS
     from .occluder_albedo import DEFAULT_OCCLUDER_ALBEDO, OCCLUDER_ALBEDO_MODES, OCCLUDER_ALBEDOS
@@ -741,15 +738,6 @@ def _parser() -> argparse.ArgumentParser:
         help="per-frame illumination: facet values whose pixels clipped at the top code "
         "left out (default 'drop'), or kept as lower bounds ('likelihood'; "
         "bayesgloss.sampling.censored)",
-    )
-    es.add_argument(
-        "--tied-sky-lobe",
-        default=None,
-        choices=tuple(TIED_SKY_LOBES),
-        help="with the lobe stack: the lobe that answers where the sky families tie "
-        "(PSIS-LOO unreliable, as on objects of 1-3 facets): the sky families' Phong fits "
-        "('phong', the default), or GGX with Schlick's rise in the lobe fitted under each "
-        "tied sky family ('coating'; bayesgloss.stacking.fit_under_tied_skies)",
     )
     es.add_argument("--out", help="folder for posterior.nc (InferenceData) and summary.json")
     es.add_argument("--json", action="store_true", help="machine-readable output")

@@ -220,7 +220,6 @@ def estimate_bundle(
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,
-    tied_sky_lobe: str | None = None,
 ) -> EstimateResult:
     """Posterior gloss of every facet of a bundle, and of the object.
 
@@ -304,11 +303,6 @@ def estimate_bundle(
         Entries clipped at the top code: left out of the joint model, or
         lower bounds (:mod:`bayesgloss.sampling.censored`); default
         :data:`bayesgloss.joint_estimate.DEFAULT_CLIPPED`.
-    tied_sky_lobe : {"phong", "coating"}, optional
-        With the lobe stack (``lobe="materials"``) under the sky families:
-        the lobe that answers where the sky families share their weight
-        equally (:data:`bayesgloss.lobe_families.TIED_SKY_LOBES`); default
-        :data:`bayesgloss.lobe_families.DEFAULT_TIED_SKY_LOBE`.
     jobs : int
         Local worker processes for the sampler (:func:`bayesgloss.pool.process_pool`).
     sampler_options : dict, optional
@@ -344,12 +338,6 @@ def estimate_bundle(
     perez_families = sky_families.perez_families_for(illumination, perez_families)
     lobe = lobe or lobe_families.default_lobe(joint, fresnel, b.has_mesh, illumination)
     lobe, lobe_stacked = lobe_families.check_lobe(lobe, fresnel, joint)
-    tied_sky_lobe = tied_sky_lobe or lobe_families.DEFAULT_TIED_SKY_LOBE
-    if tied_sky_lobe != lobe_families.DEFAULT_TIED_SKY_LOBE and lobe != "materials":
-        raise ValueError(
-            f"tied-sky lobe '{tied_sky_lobe}' answers inside the lobe stack 'materials'; "
-            f"lobe '{lobe}' has none"
-        )
     shadow = check_ground_shadow(ground_shadow or default_ground_shadow(joint))
     if shadow != "none" and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")
@@ -374,11 +362,7 @@ def estimate_bundle(
     if stack_occluder:
         stacked = fit_occluder_albedos, "occluder albedo", "occluder_albedos"
     elif lobe_stacked:
-        fit = functools.partial(
-            lobe_families.fit_lobe_families,
-            materials=lobe == "materials",
-            tied_sky_lobe=tied_sky_lobe,
-        )
+        fit = functools.partial(lobe_families.fit_lobe_families, materials=lobe == "materials")
         stacked = fit, "lobe family", "lobe_families"
     families = part = None
     if stacked is not None:
@@ -613,7 +597,6 @@ def estimate_unit(
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
     clipped: str | None = None,
-    tied_sky_lobe: str | None = None,
 ) -> dict[str, bytes]:
     """One bundle's estimate as files: ``summary.json`` and ``posterior.nc``.
 
@@ -625,7 +608,7 @@ def estimate_unit(
     whose frames were replaced is a new unit, not a finished one); a bundle
     changed since is an error. ``fresnel``, ``lobe``, ``occluder_albedo``,
     ``ground_facing``, ``overcast_variants``, ``perez_families``, ``unreliable_loo`` and
-    ``ground_shadow``, ``clipped`` and ``tied_sky_lobe``: as :func:`estimate_bundle`'s
+    ``ground_shadow`` and ``clipped``: as :func:`estimate_bundle`'s
     (given in a unit's options only where set, so that other runs keep
     their units' keys).
     """
@@ -653,6 +636,5 @@ def estimate_unit(
         unreliable_loo=unreliable_loo,
         ground_shadow=ground_shadow,
         clipped=clipped,
-        tied_sky_lobe=tied_sky_lobe,
     )
     return result_files(res)

@@ -56,14 +56,7 @@ from .joint_estimate import DEFAULT_FRESNEL, DEFAULT_LOBE_FAMILY
 from .lobes import LOBE_FAMILIES, check_lobe_family, roughness_of_exponent
 from .stacking import fit_stacked
 
-__all__ = [
-    "MATERIAL_FAMILIES",
-    "DEFAULT_LOBE",
-    "TIED_SKY_LOBES",
-    "default_lobe",
-    "check_lobe",
-    "fit_lobe_families",
-]
+__all__ = ["MATERIAL_FAMILIES", "DEFAULT_LOBE", "default_lobe", "check_lobe", "fit_lobe_families"]
 
 #: ``estimate``'s lobe where none is named and the joint model runs with no
 #: Fresnel model named (:func:`default_lobe`), since stop 42: on the two
@@ -81,15 +74,6 @@ MATERIAL_FAMILIES = {
     "ggx": ("ggx", "none"),
     "ggx-schlick": ("ggx", "schlick-lobe"),
 }
-
-#: ``--tied-sky-lobe``: the lobe that answers where the sky families share
-#: their weight equally (:func:`bayesgloss.stacking.fit_under_tied_skies`),
-#: as a label of :data:`MATERIAL_FAMILIES`: ``"phong"``, the default (the
-#: sky mixture's own Phong fits), or ``"coating"``, GGX with Schlick's rise
-#: in the lobe fitted under each tied sky (holdout 20's candidate,
-#: studies/README.md, stop 56). With ``lobe="materials"`` only.
-TIED_SKY_LOBES = {"phong": None, "coating": "ggx-schlick"}
-DEFAULT_TIED_SKY_LOBE = "phong"
 
 
 def default_lobe(
@@ -155,7 +139,6 @@ def fit_lobe_families(
     progress=None,
     jobs=1,
     materials=False,
-    tied_sky_lobe=DEFAULT_TIED_SKY_LOBE,
     **sky_options,
 ):
     """The joint model under each lobe family, stacked (module docstring).
@@ -176,9 +159,6 @@ def fit_lobe_families(
     materials : bool
         Stack :data:`MATERIAL_FAMILIES` (the lobes and the dielectric
         coating, each with its Fresnel model) instead of the lobes alone.
-    tied_sky_lobe : {"phong", "coating"}
-        The lobe that answers where the sky families tie
-        (:data:`TIED_SKY_LOBES`); ``"coating"`` needs ``materials``.
     **sky_options
         ``overcast_variants`` and ``unreliable_loo`` of
         :func:`bayesgloss.stacking.fit_stacked`.
@@ -202,13 +182,6 @@ def fit_lobe_families(
         ``lobe_family`` (the most-weighted), ``sky_families`` and ``sky``
         (where stacked), ``seconds``.
     """
-    if tied_sky_lobe not in TIED_SKY_LOBES:
-        raise ValueError(
-            f"unknown tied-sky lobe {tied_sky_lobe!r}; valid: {', '.join(TIED_SKY_LOBES)}"
-        )
-    tied_choice = TIED_SKY_LOBES[tied_sky_lobe]
-    if tied_choice is not None and not materials:
-        raise ValueError(f"tied-sky lobe {tied_sky_lobe!r} needs lobe 'materials'")
     stack = fit_stacked(
         b,
         curves,
@@ -225,7 +198,6 @@ def fit_lobe_families(
         attribute="lobe_family",
         ties="spread",
         sunless_default=True,
-        tied_sky_choice=tied_choice,
         progress=progress,
         jobs=jobs,
         **sky_options,

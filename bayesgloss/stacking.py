@@ -36,15 +36,7 @@ under one sky, a winning choice's posterior would drop the sky's
 uncertainty the equal mixture carries (stop 35: a box's answer narrowed to
 one sky's fit while flagged ``sky-family-not-identifiable``). The answer is
 then the default choice's sky mixture, and the record says the part was
-not stacked. With ``tied_sky_choice`` one other choice answers instead:
-fitted under every sky family that shares the weight and mixed with the
-same weights (:func:`fit_under_tied_skies`), so the sky's uncertainty
-stays. For the lobe that is the coating (GGX with Schlick's rise in the
-lobe): on objects of 1-3 facets, where the sky is never identified, Phong
-without a Fresnel term read a facet seen at 84 degrees, bright with the
-coating's Fresnel-raised sky, as gloss (seen Mitsuba holdout 8, ms00: a
-2-facet smooth plastic of gamma 0.611 read 0.918 [0.82, 1.00]; the coating
-under the three tied skies 0.720 [0.23, 1.00]; studies/README.md, stop 56).
+not stacked.
 """
 
 from __future__ import annotations
@@ -61,7 +53,7 @@ from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import add_facet_posteriors, joint_fit
 from .pool import process_pool, shares
 
-__all__ = ["TIED_ELPD", "StackedFits", "fit_stacked", "fit_under_tied_skies", "spread_tied_weights"]
+__all__ = ["TIED_ELPD", "StackedFits", "fit_stacked", "spread_tied_weights"]
 
 #: Posterior variables of the object that the stacked mixture replaces.
 MIXED = ("gamma_object", "n_object", "roughness_object")
@@ -191,78 +183,6 @@ def _fit_each(args, illumination, seed, options, choices, progress, jobs):
     return fits
 
 
-def fit_under_tied_skies(args, first, seed, options, progress=None, jobs=1):
-    """One choice fitted under each sky family of nonzero weight, mixed with those weights.
-
-    Parameters
-    ----------
-    args : tuple
-        ``(b, curves, y, usable, censored, keep)`` of
-        :func:`bayesgloss.joint_estimate.joint_fit`.
-    first : tuple
-        :func:`bayesgloss.sky_families.fit_families`' result (its posterior's
-        ``sky_family_weights`` and ``sky_family_most_weight``).
-    seed : int
-    options : dict
-        The choice's sampler options.
-    progress : callable, optional
-        Called with (fits done, fits).
-    jobs : int
-        Fits at once in worker processes.
-
-    Returns
-    -------
-    fit : tuple
-        ``(idata, samples, used)`` of the fit under the most-weighted sky
-        family, its ``gamma_object`` and ``n_object`` replaced by the
-        mixture's draws and the sky's record copied from ``first``.
-    entries : dict
-        Per sky family fitted: its weight and the quantiles of its own
-        ``gamma_object``.
-    seconds : float
-        Of all the fits.
-    """
-    attrs = first[0].posterior.attrs
-    weights = {k: w for k, w in json.loads(attrs["sky_family_weights"]).items() if w > 0}
-    names = list(weights)
-    fits = {}
-    outer, inner = shares(jobs, len(names))
-    if outer > 1:
-        with process_pool(outer) as pool:
-            futures = {
-                pool.submit(joint_fit, *args, name, seed, options, facets=False, jobs=inner): name
-                for name in names
-            }
-            for done, future in enumerate(as_completed(futures), 1):
-                fits[futures[future]] = future.result()
-                if progress is not None:
-                    progress(done, len(names))
-    else:
-        for name in names:
-            fits[name] = joint_fit(*args, name, seed, options, facets=False, jobs=inner)
-            if progress is not None:
-                progress(len(fits), len(names))
-    best = attrs["sky_family_most_weight"]
-    best = best if best in fits else max(names, key=weights.get)
-    entries = {
-        name: {
-            "weight": float(weights[name]),
-            "gamma": _quantiles(fits[name][0].posterior["gamma_object"].values, GAMMA_BOUNDS),
-        }
-        for name in names
-    }
-    seconds = sum(fit[1].seconds for fit in fits.values())
-    own = [fits[name][0].posterior.copy(deep=True) for name in names]
-    idata = fits[best][0]
-    w = np.array([weights[name] for name in names])
-    sky_families.mix_posteriors(
-        idata, own, ("gamma_object", "n_object"), w, np.random.default_rng(seed)
-    )
-    for key in ("sky_family_weights", "sky_family_most_weight", "sky_family_equal_weights"):
-        idata.posterior.attrs[key] = attrs[key]
-    return (idata, fits[best][1], fits[best][2]), entries, seconds
-
-
 def fit_stacked(
     b,
     curves,
@@ -285,7 +205,6 @@ def fit_stacked(
     perez_families=sky_families.DEFAULT_PEREZ_FAMILIES,
     ties="stacking",
     sunless_default=False,
-    tied_sky_choice=None,
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
 
@@ -327,13 +246,6 @@ def fit_stacked(
         lobe's shape: the lobe stack read 0.94 [0.79, 1.00] for a true 0.10
         (Mitsuba holdout 1, ms16) and 0.054 [0, 0.15] for a true 0 where
         Phong alone read 0.012 (holdout 8, vs18; ``studies/README.md``).
-    tied_sky_choice : str, optional
-        With ``illumination="families"``, the label that answers where the
-        sky families share their weight equally (PSIS-LOO unreliable) and
-        the day is not sunless: fitted under each sky family of nonzero
-        weight and mixed (:func:`fit_under_tied_skies`; recorded in the sky's
-        record as ``tied_sky_answer``). None (the default): the default
-        label's sky mixture answers there.
     """
     if ties not in TIES:
         raise ValueError(f"unknown ties {ties!r}; valid: {', '.join(TIES)}")
@@ -346,7 +258,7 @@ def fit_stacked(
         values = (choices[label],) if isinstance(option, str) else choices[label]
         return {**options, **dict(zip(keys, values, strict=True))}
 
-    seconds, sky_info, tied = 0.0, None, False
+    seconds, sky_info = 0.0, None
     if illumination == "families":
         first = sky_families.fit_families(
             *args,
@@ -362,17 +274,9 @@ def fit_stacked(
         seconds += sky_info.pop("seconds")
         others = {label: opts(label) for label in labels if label != default}
         sunless = sunless_default and sky_info["most_weight"] in sky_families.OVERCAST_GROUP
-        tied = sky_info.get("equal_weights") and not sunless and tied_sky_choice is not None
         if sky_info.get("equal_weights") or sunless:  # the default alone
             labels, others = [default], {}
         fits = {default: first[:3]}
-        if tied:  # one other choice under the tied skies answers instead
-            fit, entries, tied_seconds = fit_under_tied_skies(
-                args, first, seed, opts(tied_sky_choice), progress, jobs
-            )
-            labels, fits = [tied_sky_choice], {tied_sky_choice: fit}
-            sky_info["tied_sky_answer"] = {"choice": tied_sky_choice, "families": entries}
-            seconds += tied_seconds
         fits.update(_fit_each(args, sky_info["most_weight"], seed, options, others, progress, jobs))
     else:
         if sunless_default and illumination in sky_families.OVERCAST_GROUP:
@@ -390,14 +294,14 @@ def fit_stacked(
     if "gamma" not in idata.posterior:  # facets' own posteriors of the chosen fit only
         add_facet_posteriors(idata, samples, seed, jobs)
     for label, fit in fits.items():
-        if (label != default or sky_info is None) and not tied:  # the tied skies' counted
+        if label != default or sky_info is None:
             seconds += fit[1].seconds
     seconds += samples.facets.seconds
     mixed = [v for v in MIXED if all(v in own[k] for k in labels)]
     sky_families.mix_posteriors(
         idata, [own[k] for k in labels], mixed, weights, np.random.default_rng(seed)
     )
-    if sky_info is not None and best != default and default in own:  # keep the sky's record
+    if sky_info is not None and best != default:  # keep the sky's record
         for key in ("sky_family_weights", "sky_family_most_weight", "sky_family_equal_weights"):
             idata.posterior.attrs[key] = own[default].attrs[key]
     idata.posterior.attrs[f"{attribute}_weights"] = json.dumps(

@@ -90,7 +90,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
-    "radiance-ward", "within-10", "in-lobe", "tied-coating",
+    "radiance-ward", "within-10", "in-lobe",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -159,11 +159,6 @@ ESTIMATES = {
 # holdout 16's candidate (stop 48): the default with the convex object's shadow on
 # the ground (``estimate --ground-shadow convex``, bayesgloss.object_shadow)
 ESTIMATES["ground-shadow"] = {**ESTIMATES["perez"], "ground_shadow": "convex"}
-# holdout 20's candidate (stop 56): where the sky families tie (PSIS-LOO
-# unreliable, as on objects of 1-3 facets) and the day is sun-lit, GGX with
-# Schlick's rise in the lobe answers, fitted under each tied sky family,
-# instead of the sky families' Phong fits (``estimate --tied-sky-lobe coating``)
-ESTIMATES["tied-coating"] = {**ESTIMATES["perez"], "tied_sky_lobe": "coating"}
 #: Methods scored by default on a set that has none cached (``--methods``).
 DEFAULT_METHODS = {
     "mitsuba_set": ("families", "lobes"),
@@ -237,21 +232,6 @@ def _overcast_lost(entry: dict | None) -> bool:
     the same fit as the default's, same seed)."""
     stack = (entry or {}).get("sky_families")
     return bool(stack) and stack["most_weight"] != "gensky-overcast"
-
-
-def _sky_tied_sunlit(entry: dict | None) -> bool:
-    """Whether a default estimate's sky families shared their weight equally
-    on a day whose most-weighted family is not an overcast one: where
-    ``tied_sky_lobe="coating"`` fits something (elsewhere its answer is the
-    default's, same fit, same seed)."""
-    from bayesgloss.sky_families import OVERCAST_GROUP
-
-    stack = (entry or {}).get("sky_families")
-    return (
-        bool(stack)
-        and bool(stack.get("equal_weights"))
-        and stack["most_weight"] not in OVERCAST_GROUP
-    )
 
 
 def _loo_reliable(entry: dict | None) -> bool:
@@ -382,9 +362,6 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
             continue
         if name == "overcast-variants" and _overcast_lost(out.get("families")):
             out[name] = {**out["families"], "same_fit_as": "families"}  # no variant fitted
-            continue
-        if name == "tied-coating" and "perez" in out and not _sky_tied_sunlit(out["perez"]):
-            out[name] = {**out["perez"], "same_fit_as": "perez"}  # the default's own answer
             continue
         if name == "loo-equal" and _loo_reliable(out.get("families")):
             out[name] = {**out["families"], "same_fit_as": "families"}  # weights kept

@@ -266,8 +266,6 @@ def test_materials_choose_their_own_fresnel_model(tmp_path):
     path = make_synthetic_bundle(tmp_path / "b")
     with pytest.raises(ValueError, match="lobe 'materials' chooses each fit's Fresnel model"):
         estimate.estimate_bundle(path, lobe="materials", fresnel="schlick")
-    with pytest.raises(ValueError, match="tied-sky lobe 'coating' answers inside the lobe stack"):
-        estimate.estimate_bundle(path, lobe="phong", tied_sky_lobe="coating")
 
 
 def test_lobe_families_need_per_frame_illumination(tmp_path):
