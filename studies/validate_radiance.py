@@ -71,6 +71,7 @@ SETS = {
     "validation_holdout17": "validation_holdout17",
     "validation_holdout18": "validation_holdout18",
     "validation_holdout19": "validation_holdout19",
+    "validation_holdout20": "validation_holdout20",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -187,6 +188,7 @@ DEFAULT_METHODS = {
     "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
     "validation_holdout18": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
+    "validation_holdout20": ("baseline", "perez"),  # the floor rule: the default scores it
 }
 
 
