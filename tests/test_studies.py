@@ -517,3 +517,17 @@ def test_floor_rule_chose_0_03_on_the_seen_sets():
     assert out["table"][0.06]["radiance"] == 1.0
     assert round(out["table"][0.03]["radiance"], 3) == 0.947
     assert round(out["table"][0.03]["mitsuba"], 3) == 0.872
+
+
+def test_floor_rule_reads_mitsuba_holdout9_as_stop_56_decided():
+    # the rule's Mitsuba half, on the default's committed scores: floor
+    # 0.03 holds 15 of 19 sun-lit (0.79, below the band and farther from
+    # 0.90 than the default's 17 of 19) with 4 confident misses (the
+    # default's 2), so condition 1 fails for Mitsuba and the floor stays
+    fr = study_module("floor_rule")
+    out = fr.apply_rule({"mitsuba_holdout9": fr.load_scores("mitsuba_holdout9", cached=False)})
+    d, c = (out["by_renderer"]["mitsuba"][m] for m in ("default", "candidate"))
+    assert (d["held"], c["held"], d["sun_lit"]) == (17, 15, 19)
+    assert (d["confident_misses"], c["confident_misses"]) == (2, 4)
+    assert not out["decision"]["(1) per renderer in 85-97 % or no farther from 90 %"]["mitsuba"]
+    assert not out["decision"]["met"]
