@@ -47,6 +47,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
+from holdout_rule import load_set  # noqa: E402
 from model_error_floor import widened  # noqa: E402
 from validate_radiance import SETS, confident_miss, overcast_ok, reported_interval  # noqa: E402
 from validate_radiance import _holds as holds  # noqa: E402
@@ -66,14 +67,11 @@ def renderer(set_name: str) -> str:
     return "mitsuba" if "mitsuba" in set_name else "radiance"
 
 
-def load_scores(set_name: str, cached: bool) -> list[dict]:
-    """A set's scores with a default (``perez``) entry."""
-    if cached:
-        files = sorted((HERE / "out" / set_name / "scores").glob("*.json"))
-        rows = [json.loads(f.read_text()) for f in files]
-    else:
-        rows = json.loads((HERE / "results" / f"{SETS[set_name]}.json").read_text())["sequences"]
-    return [r for r in rows if "perez" in r and r["truth"] is not None]
+def load_scores(set_name: str, cached: bool, method: str = "perez") -> list[dict]:
+    """A set's scores holding ``method``, its entry as the default's (``perez``)
+    (:func:`holdout_rule.load_set`)."""
+    scores, _ = load_set(set_name, cached, (method, method))
+    return [{**s, "perez": s[method]} for s in scores]
 
 
 def with_floor(entry: dict, floor: float, rng: np.random.Generator) -> dict:
@@ -172,19 +170,10 @@ def choose_floor(sets: dict[str, list[dict]] | None = None) -> dict:
     coverage lies in 85-97 % and the pooled one is at least 90 %; with the
     coverage of every floor tried."""
     if sets is None:
-        sets = {}
-        for name, method in SEEN.items():
-            rows = (
-                load_scores(name, cached=False)
-                if method == "perez"
-                else [
-                    {**s, "perez": s[method]}
-                    for s in json.loads((HERE / "results" / f"{SETS[name]}.json").read_text())[
-                        "sequences"
-                    ]
-                ]
-            )
-            sets[name] = [r for r in rows if r["direct_sun"]]
+        sets = {
+            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
+            for name, method in SEEN.items()
+        }
     table = {}
     for floor in GRID:
         out = apply_rule(sets, float(floor))["by_renderer"]
