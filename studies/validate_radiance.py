@@ -72,6 +72,7 @@ SETS = {
     "validation_holdout18": "validation_holdout18",
     "validation_holdout19": "validation_holdout19",
     "validation_holdout20": "validation_holdout20",
+    "validation_holdout21": "validation_holdout21",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -91,7 +92,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
-    "radiance-ward", "within-10", "in-lobe",
+    "radiance-ward", "within-10", "in-lobe", "cie-overcast",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -119,6 +120,9 @@ SCORED_ELSEWHERE = {
     # holdout 18's second candidate, branch schlick-in-lobe: ggx-schlick with
     # Schlick's rise inside the lobe's integral (bayesgloss.lobes.ggx_schlick_rise_basis)
     "in-lobe": "perez",
+    # holdout 21's candidate, branch cie-overcast: --overcast-variants on by default,
+    # its shapes CIE types 2, 3, 4 and the uniform sky (bayesgloss.sky_families)
+    "cie-overcast": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -189,6 +193,7 @@ DEFAULT_METHODS = {
     "validation_holdout18": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
     "validation_holdout20": ("baseline", "perez"),  # drawn for the floor rule; free for the next
+    "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
 }
 
 
