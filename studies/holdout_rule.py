@@ -16,6 +16,14 @@ sunless ones for (d), all for (e)):
 (e) its median seconds a sequence over all sequences are at most
     ``--speed-limit`` (1.25) times the default's.
 
+A rule about sunless days alone (holdout 21's, ``--sunless``) has its own
+five, over the sets' sunless sequences pooled (:func:`sunless_rule`): (a)
+the overcast rule passes on at least as many; (b) the reported 90 %
+interval holds the truth on at least as many; (c) no more confident
+misses; (d) the MAE at most ``--mae-tolerance`` (0.02) above the
+default's; (e) median seconds at most ``--speed-limit`` times the
+default's (2 in that rule).
+
 A rule's own condition (f), a named test passing on the candidate, is run
 by hand. Reported beside the rule, as every rule asks: per set, per
 material class, per sky type, per facet count (1-3, more) and
@@ -148,6 +156,77 @@ def rule(
     }
 
 
+def sunless_figures(scores: list[dict], method: str) -> dict:
+    """A method's figures on the sunless sequences of ``scores``: overcast
+    rule, held, confident misses, MAE, median width and median seconds."""
+    days = [s for s in scores if not s["direct_sun"]]
+    err = [abs(s[method]["median"] - s["truth"]) for s in days]
+    return {
+        "sunless": len(days),
+        "overcast_ok": sum(overcast_ok(s[method], s["truth"]) for s in days),
+        "held": sum(holds(s[method], s["truth"]) for s in days),
+        "confident_misses": [
+            s["bundle"][:4] for s in days if confident_miss(s[method], s["truth"])
+        ],
+        "mae": float(np.mean(err)) if err else None,
+        "median_width": float(np.median([np.ptp(reported_interval(s[method])) for s in days]))
+        if days
+        else None,
+        "median_seconds": float(np.median([s[method]["seconds"] for s in days])) if days else None,
+    }
+
+
+def sunless_rule(
+    sets: dict[str, list[dict]],
+    default: str,
+    candidate: str,
+    *,
+    mae_tolerance: float = 0.02,
+    speed_limit: float = 2.0,
+) -> dict:
+    """The sunless rule's conditions (a)-(e) (module docstring), pooled over
+    the sunless sequences of ``sets``, with each sequence's answers beside."""
+    pooled = [s for scores in sets.values() for s in scores]
+    d, c = sunless_figures(pooled, default), sunless_figures(pooled, candidate)
+    ratio = c["median_seconds"] / d["median_seconds"] if d["median_seconds"] else None
+    conditions = {
+        "a": c["overcast_ok"] >= d["overcast_ok"],
+        "b": c["held"] >= d["held"],
+        "c": len(c["confident_misses"]) <= len(d["confident_misses"]),
+        "d": d["mae"] is not None and c["mae"] <= d["mae"] + mae_tolerance,
+        "e": ratio is not None and ratio <= speed_limit,
+    }
+    days = [
+        {
+            "bundle": s["bundle"],
+            "sky": s.get("sky"),
+            "class": s.get("class"),
+            "facets": s.get("facets"),
+            "truth": s["truth"],
+            **{
+                m: {
+                    "median": s[m]["median"],
+                    "interval": [float(x) for x in reported_interval(s[m])],
+                    "overcast_ok": bool(overcast_ok(s[m], s["truth"])),
+                    "most_weight": (s[m].get("sky_families") or {}).get("most_weight"),
+                }
+                for m in (default, candidate)
+            },
+        }
+        for s in pooled
+        if not s["direct_sun"]
+    ]
+    return {
+        "default": default,
+        "candidate": candidate,
+        "pooled": {default: d, candidate: c},
+        "speed_ratio": ratio,
+        "conditions": conditions,
+        "met": all(conditions.values()),
+        "days": days,
+    }
+
+
 def fitted_by_set_and_class(sets: dict[str, list[dict]], candidate: str) -> dict:
     """The sequences the candidate fitted (:func:`candidate_fit`), grouped
     as ``"<set>, <class>"``, in order."""
@@ -245,7 +324,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--candidate", required=True, help="the candidate's method name")
     ap.add_argument("--cached", action="store_true", help="read the sets' score caches")
     ap.add_argument("--set-tolerance", type=float, default=0.01)
-    ap.add_argument("--speed-limit", type=float, default=1.25)
+    ap.add_argument("--speed-limit", type=float, default=None, help="1.25; 2 with --sunless")
+    ap.add_argument("--sunless", action="store_true", help="the sunless days' rule (sunless_rule)")
+    ap.add_argument("--mae-tolerance", type=float, default=0.02, help="with --sunless")
     ap.add_argument("--json", help="also write the figures to this file")
     ap.add_argument(
         "--blend-truth",
@@ -258,6 +339,9 @@ def main(argv=None) -> dict:
     sets, sizes = {}, {}
     for name in args.sets:
         sets[name], sizes[name] = load_set(name, args.cached, methods)
+    if args.sunless:
+        return _sunless_main(args, sets, sizes, methods)
+    args.speed_limit = args.speed_limit or 1.25
     out = rule(
         sets,
         *methods,
@@ -307,6 +391,39 @@ def main(argv=None) -> dict:
         print("with the smooth metals' sampled gloss as truth (reported beside the rule):")
         for m in methods:
             print(_line(m, again["pooled"][m]))
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1, default=_plain) + "\n")
+    return out
+
+
+def _sunless_main(args, sets, sizes, methods) -> dict:
+    """``--sunless``: :func:`sunless_rule`, printed (and written with ``--json``)."""
+    out = sunless_rule(
+        sets, *methods, mae_tolerance=args.mae_tolerance, speed_limit=args.speed_limit or 2.0
+    )
+    out["scored_by_both"] = {name: [len(sets[name]), sizes[name]] for name in sets}
+    for name in sets:
+        print(f"{name}: {len(sets[name])} of {sizes[name]} bundles scored by both")
+    for m in methods:
+        f = out["pooled"][m]
+        print(
+            f"  {m:<16} overcast {f['overcast_ok']}/{f['sunless']}  held {f['held']}"
+            f"  confident misses {len(f['confident_misses'])} {f['confident_misses']}"
+            f"  MAE {f['mae']:.3f}  width {f['median_width']:.2f}"
+            f"  median s {f['median_seconds']:.0f}"
+        )
+    print(f"  speed ratio {out['speed_ratio']:.2f}")
+    for key, value in out["conditions"].items():
+        print(f"  ({key}) {'met' if value else 'NOT met'}")
+    print("rule met" if out["met"] else "rule NOT met")
+    for day in out["days"]:
+        answers = "  ".join(
+            f"{m} {day[m]['median']:.3f} [{day[m]['interval'][0]:.2f}, {day[m]['interval'][1]:.2f}]"
+            f"{' ok' if day[m]['overcast_ok'] else ''} ({day[m]['most_weight']})"
+            for m in methods
+        )
+        about = f"{day['bundle'][:22]:<22} {day['sky']:<16} {day['facets']:>3} {day['truth']:.3f}"
+        print(f" {about}  {answers}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1, default=_plain) + "\n")
     return out

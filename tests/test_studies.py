@@ -354,6 +354,37 @@ def test_holdout_rule_pools_sets_and_refuses_a_set_much_worse():
     assert not hr.rule({"one": slow}, "d", "c")["conditions"]["e"]
 
 
+def test_holdout_rule_judges_sunless_days_on_their_own_conditions():
+    # holdout 21's rule: sun-lit sequences are not counted; the candidate
+    # trades 0.005 of MAE for an interval that holds a day the default
+    # missed confidently (met: within the 0.02 tolerance), then 0.03 (not met)
+    hr = study_module("holdout_rule")
+    flag = ["gloss-not-identifiable"]
+    days = [
+        _rule_score("vs00", 0.85, False, (0.81, 0.79, 0.83, 100), (0.85, 0.50, 1.00, 180)),
+        _rule_score("vs01", 0.00, False, (0.01, 0.00, 0.09, 100), (0.06, 0.0, 0.6, 180, flag)),
+        # a sun-lit sequence the sunless rule must leave out (its miss would fail (c))
+        _rule_score("vs02", 0.50, True, (0.50, 0.45, 0.55, 100), (0.90, 0.85, 0.95, 100)),
+    ]
+    out = hr.sunless_rule({"one": days}, "d", "c")
+    d, c = out["pooled"]["d"], out["pooled"]["c"]
+    assert (d["sunless"], c["sunless"]) == (2, 2)
+    assert d["confident_misses"] == ["vs00"] and c["confident_misses"] == []
+    assert (d["held"], c["held"]) == (1, 2)
+    assert (d["overcast_ok"], c["overcast_ok"]) == (2, 2)  # c's vs01 flagged and 0.6 wide
+    assert d["mae"] == pytest.approx(0.025) and c["mae"] == pytest.approx(0.03)
+    assert out["speed_ratio"] == pytest.approx(1.8)
+    assert out["conditions"] == dict.fromkeys("abcde", True) and out["met"]
+    # vs01 0.05 farther: MAE 0.03 above the default's, (d) not met
+    days[1]["c"]["median"] = 0.11
+    out = hr.sunless_rule({"one": days}, "d", "c")
+    assert out["pooled"]["c"]["mae"] == pytest.approx(0.055)
+    assert not out["conditions"]["d"] and not out["met"]
+    # and 2.2 times the default's seconds fails (e)
+    slow = [dict(s, c=dict(s["c"], seconds=220)) for s in days]
+    assert not hr.sunless_rule({"one": slow}, "d", "c")["conditions"]["e"]
+
+
 def test_holdout_rule_reports_the_sequences_the_candidate_fitted_on_their_own():
     # a copied score (same_fit_as) cannot move, so the rule reports the fitted
     # ones apart, per set and class, with each lobe family's weight and own
