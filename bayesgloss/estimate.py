@@ -215,7 +215,7 @@ def estimate_bundle(
     lobe: str | None = None,
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
-    overcast_variants: bool = False,
+    overcast_variants: bool | None = None,
     perez_families: bool | None = None,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,
@@ -281,9 +281,9 @@ def estimate_bundle(
         (:mod:`bayesgloss.ground_facing`): left out, flagged
         ``faces-ground`` (unless no other facet is usable), or kept; default
         :data:`bayesgloss.ground_facing.DEFAULT_GROUND_FACING`.
-    overcast_variants : bool
-        With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS`
-        where the overcast sky wins (opt-in: studies/README.md, holdouts 4 and 5).
+    overcast_variants : bool, optional
+        With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS` where
+        the overcast sky wins (default: :data:`~.sky_families.DEFAULT_OVERCAST_VARIANTS`).
     perez_families : bool, optional
         With the sky families: also :data:`~bayesgloss.sky_families.PEREZ_FAMILIES`
         (:func:`~bayesgloss.sky_families.perez_families_for`; default: yes).
@@ -592,7 +592,7 @@ def estimate_unit(
     lobe: str | None = None,
     occluder_albedo: str | None = None,
     ground_facing: str | None = None,
-    overcast_variants: bool = False,
+    overcast_variants: bool | None = None,
     perez_families: bool | None = None,
     unreliable_loo: str = "equal",
     ground_shadow: str | None = None,

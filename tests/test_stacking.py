@@ -146,6 +146,12 @@ def test_the_sky_options_reach_the_sky_families_under_a_second_stack(tmp_path, m
             )
         assert got.value.args[0]["unreliable_loo"] == "stack", lobe
         assert got.value.args[0]["overcast_variants"] is True, lobe
+    # not named: None reaches the stack, which fits the overcast shapes (the
+    # default since holdout 21; test_sky_families); --no-overcast-variants: False
+    for given, sent in ((None, None), (False, False)):
+        with pytest.raises(Called) as got:
+            estimate.estimate_bundle(path, overcast_variants=given)
+        assert got.value.args[0]["overcast_variants"] is sent, given
 
 
 def test_fits_tied_with_the_best_share_its_weight():
