@@ -128,7 +128,12 @@ SCORED_ELSEWHERE = {
 #: Every method scored before stop 43 fits the sky families' stack of four
 #: it was scored with (:data:`FOUR_SKY_FAMILIES`; the Perez shapes joined
 #: the default at stop 43, after holdout 11; ``"perez"`` is that default).
-FOUR_SKY_FAMILIES = {"per_frame": True, "illumination": "families", "perez_families": False}
+FOUR_SKY_FAMILIES = {
+    "per_frame": True,
+    "illumination": "families",
+    "perez_families": False,
+    "overcast_variants": False,  # on by default since stop 57; these methods were scored without
+}
 ESTIMATES = {
     "fixed": {"per_frame": False},
     "per-frame": {"per_frame": True},
@@ -136,6 +141,7 @@ ESTIMATES = {
     # the default with facets facing the ground kept (stop 32's change undone)
     "ground-kept": {**FOUR_SKY_FAMILIES, "ground_facing": "keep"},
     # the default with CIE type 3 and a uniform sky fitted where the overcast sky wins
+    # (holdouts 4-5; since stop 57 the shapes are CIE 2, 3, 4 and uniform)
     "overcast-variants": {**FOUR_SKY_FAMILIES, "overcast_variants": True},
     # the default with equal weights where the stack's PSIS-LOO is unreliable
     "loo-equal": {**FOUR_SKY_FAMILIES, "unreliable_loo": "equal"},
@@ -153,7 +159,8 @@ ESTIMATES = {
     # (bayesgloss.sky_families.PEREZ_FAMILIES); since stop 45 with no weight for the sky
     # families beyond doubt behind where PSIS-LOO is unreliable (holdout 13's "equal-near");
     # estimate's own defaults since: the day-level exposure (47), the convex ground
-    # shadow (49), within-10 and the coating's rise inside the lobe (55)
+    # shadow (49), within-10 and the coating's rise inside the lobe (55), and the CIE
+    # overcast shapes where the overcast sky wins (57, holdout 21's "cie-overcast")
     "perez": {
         "per_frame": True,
         "illumination": "families",
@@ -192,7 +199,7 @@ DEFAULT_METHODS = {
     "validation_holdout17": ("baseline", "perez"),  # and radiance-ward, merged
     "validation_holdout18": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
-    "validation_holdout20": ("baseline", "perez"),  # drawn for the floor rule; free for the next
+    "validation_holdout20": ("baseline", "perez"),  # the default after holdout 21, measured
     "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
 }
 
