@@ -71,13 +71,18 @@ def test_overcast_day_is_told_overcast(tmp_path, capsys):
     from bayesgloss import bundle as bundle_io
     from bayesgloss import cli, report
 
+    # Since stop 57 the other CIE overcast shapes are fitted where it wins and
+    # share the overcast group's weight (the gradation is rarely told)
     path, res = _sky_families_of_a_forward_model_day(tmp_path / "b", "gensky-overcast")
     fam = res.summary["sky_families"]
-    assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
-    assert fam["most_weight"] == "gensky-overcast"
+    every = {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
+    assert set(fam["families"]) == every | set(sky_families.OVERCAST_VARIANTS)
+    assert fam["most_weight"] in sky_families.OVERCAST_GROUP
     weights = {name: f["weight"] for name, f in fam["families"].items()}
     assert sum(weights.values()) == pytest.approx(1.0)
-    assert weights["gensky-overcast"] > 0.9, fam
+    assert sum(weights[name] for name in sky_families.OVERCAST_GROUP) > 0.9, fam
+    # the shapes brightening toward the hidden sun (CIE 2, 4) are told apart
+    assert weights["cie-2"] + weights["cie-4"] < 0.05, fam
     assert res.summary["sampler"]["model"].startswith("joint, one fit per sky family")
     gamma = res.idata.posterior["gamma_object"].values
     own = res.summary["object"]["gamma_within_model"]  # the stack's own, its error aside
