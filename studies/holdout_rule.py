@@ -109,9 +109,8 @@ def rule(
 ) -> dict:
     """Conditions (a)-(e) of the module docstring, pooled over ``sets`` (name:
     scores holding both methods), with each set's figures beside them."""
-    pooled = [s for scores in sets.values() for s in scores]
+    pooled, d, c, ratio = _pooled(sets, (default, candidate), method_figures)
     fitted = fitted_by_set_and_class(sets, candidate)
-    d, c = method_figures(pooled, default), method_figures(pooled, candidate)
     per_set = {
         name: {m: method_figures(scores, m) for m in (default, candidate)}
         for name, scores in sets.items()
@@ -122,7 +121,6 @@ def rule(
         if fig[default]["mae"] is not None
         and fig[candidate]["mae"] > fig[default]["mae"] + set_tolerance
     ]
-    ratio = c["median_seconds"] / d["median_seconds"] if d["median_seconds"] else None
     conditions = {
         "a": d["mae"] is not None and c["mae"] < d["mae"] and not worse,
         "b": c["held"] >= d["held"],
@@ -156,6 +154,15 @@ def rule(
     }
 
 
+def _pooled(sets: dict[str, list[dict]], methods: tuple[str, str], figures) -> tuple:
+    """The sets' scores pooled, ``figures`` of the default and the candidate
+    on them, and the ratio of their median seconds."""
+    pooled = [s for scores in sets.values() for s in scores]
+    d, c = (figures(pooled, m) for m in methods)
+    ratio = c["median_seconds"] / d["median_seconds"] if d["median_seconds"] else None
+    return pooled, d, c, ratio
+
+
 def sunless_figures(scores: list[dict], method: str) -> dict:
     """A method's figures on the sunless sequences of ``scores``: overcast
     rule, held, confident misses, MAE, median width and median seconds."""
@@ -186,9 +193,7 @@ def sunless_rule(
 ) -> dict:
     """The sunless rule's conditions (a)-(e) (module docstring), pooled over
     the sunless sequences of ``sets``, with each sequence's answers beside."""
-    pooled = [s for scores in sets.values() for s in scores]
-    d, c = sunless_figures(pooled, default), sunless_figures(pooled, candidate)
-    ratio = c["median_seconds"] / d["median_seconds"] if d["median_seconds"] else None
+    pooled, d, c, ratio = _pooled(sets, (default, candidate), sunless_figures)
     conditions = {
         "a": c["overcast_ok"] >= d["overcast_ok"],
         "b": c["held"] >= d["held"],
