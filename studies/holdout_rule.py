@@ -69,20 +69,31 @@ def facet_count(score: dict) -> str:
     return "1-3 facets" if score["facets"] <= 3 else "more than 3"
 
 
+def answer_figures(rows: list[dict], method: str) -> dict:
+    """A method's answers on ``rows`` against their truths: MAE, median width
+    of the reported interval, held, and confident misses (the bundles' first
+    four characters); None for the MAE and width of no rows."""
+    err = [abs(s[method]["median"] - s["truth"]) for s in rows]
+    widths = [np.ptp(reported_interval(s[method])) for s in rows]
+    return {
+        "mae": float(np.mean(err)) if err else None,
+        "median_width": float(np.median(widths)) if widths else None,
+        "held": sum(holds(s[method], s["truth"]) for s in rows),
+        "confident_misses": [
+            s["bundle"][:4] for s in rows if confident_miss(s[method], s["truth"])
+        ],
+    }
+
+
 def method_figures(scores: list[dict], method: str) -> dict:
-    """A method's figures on ``scores``: sun-lit MAE, held, confident misses
-    (the bundles' first four characters), overcast rule, median seconds and
+    """A method's figures on ``scores``: :func:`answer_figures` of the sun-lit
+    sequences, the overcast rule on the sunless, median seconds and
     ``not-converged``."""
     sun = [s for s in scores if s["direct_sun"]]
     sunless = [s for s in scores if not s["direct_sun"]]
-    err = [abs(s[method]["median"] - s["truth"]) for s in sun]
-    widths = [np.ptp(reported_interval(s[method])) for s in sun]
     return {
         "sun_lit": len(sun),
-        "mae": float(np.mean(err)) if err else None,
-        "median_width": float(np.median(widths)) if widths else None,
-        "held": sum(holds(s[method], s["truth"]) for s in sun),
-        "confident_misses": [s["bundle"][:4] for s in sun if confident_miss(s[method], s["truth"])],
+        **answer_figures(sun, method),
         "sunless": len(sunless),
         "overcast_ok": sum(overcast_ok(s[method], s["truth"]) for s in sunless),
         "median_seconds": float(np.median([s[method]["seconds"] for s in scores]))
@@ -164,21 +175,13 @@ def _pooled(sets: dict[str, list[dict]], methods: tuple[str, str], figures) -> t
 
 
 def sunless_figures(scores: list[dict], method: str) -> dict:
-    """A method's figures on the sunless sequences of ``scores``: overcast
-    rule, held, confident misses, MAE, median width and median seconds."""
+    """A method's figures on the sunless sequences of ``scores``: the overcast
+    rule, :func:`answer_figures` and median seconds."""
     days = [s for s in scores if not s["direct_sun"]]
-    err = [abs(s[method]["median"] - s["truth"]) for s in days]
     return {
         "sunless": len(days),
         "overcast_ok": sum(overcast_ok(s[method], s["truth"]) for s in days),
-        "held": sum(holds(s[method], s["truth"]) for s in days),
-        "confident_misses": [
-            s["bundle"][:4] for s in days if confident_miss(s[method], s["truth"])
-        ],
-        "mae": float(np.mean(err)) if err else None,
-        "median_width": float(np.median([np.ptp(reported_interval(s[method])) for s in days]))
-        if days
-        else None,
+        **answer_figures(days, method),
         "median_seconds": float(np.median([s[method]["seconds"] for s in days])) if days else None,
     }
 
@@ -344,9 +347,10 @@ def main(argv=None) -> dict:
     sets, sizes = {}, {}
     for name in args.sets:
         sets[name], sizes[name] = load_set(name, args.cached, methods)
+    if args.speed_limit is None:  # the rules' own limits (module docstring)
+        args.speed_limit = 2.0 if args.sunless else 1.25
     if args.sunless:
         return _sunless_main(args, sets, sizes, methods)
-    args.speed_limit = args.speed_limit or 1.25
     out = rule(
         sets,
         *methods,
@@ -404,7 +408,7 @@ def main(argv=None) -> dict:
 def _sunless_main(args, sets, sizes, methods) -> dict:
     """``--sunless``: :func:`sunless_rule`, printed (and written with ``--json``)."""
     out = sunless_rule(
-        sets, *methods, mae_tolerance=args.mae_tolerance, speed_limit=args.speed_limit or 2.0
+        sets, *methods, mae_tolerance=args.mae_tolerance, speed_limit=args.speed_limit
     )
     out["scored_by_both"] = {name: [len(sets[name]), sizes[name]] for name in sets}
     for name in sets:
