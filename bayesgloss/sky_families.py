@@ -108,6 +108,7 @@ __all__ = [
     "FAMILIES",
     "OVERCAST_VARIANTS",
     "DEFAULT_OVERCAST_VARIANTS",
+    "FIRST_STACK_OVERCAST",
     "OVERCAST_GROUP",
     "PEREZ_FAMILIES",
     "DEFAULT_PEREZ_FAMILIES",
@@ -164,6 +165,14 @@ OVERCAST_VARIANTS = ("cie-2", "cie-3", "cie-4", "gensky-uniform")
 #: median time. On days whose first stack the overcast sky does not win
 #: (CIE types 2 and 4 often go to ``auto``) nothing changes.
 DEFAULT_OVERCAST_VARIANTS = True
+#: Of :data:`OVERCAST_VARIANTS`, those fitted in the first stack beside
+#: :data:`FAMILIES` (with ``overcast_variants``) rather than only where an
+#: overcast shape wins it: none in the default. The candidate of holdout 22
+#: (``studies/patches/sun-side-overcast.patch``) fits there the CIE types 2
+#: and 4, whose brightening toward the hidden sun the per-frame mixture
+#: reads as a sun (holdout 21's CIE type-2 days read 0.947 for 0.506 and
+#: 0.902 for 0, neither under an overcast shape).
+FIRST_STACK_OVERCAST: tuple[str, ...] = ()
 
 #: Clear-sky Perez shapes fitted as well with ``perez_families`` (the
 #: default since stop 43, :data:`DEFAULT_PEREZ_FAMILIES`; ``estimate
@@ -601,9 +610,11 @@ def fit_families(
     ``jobs`` > 1 fits that many families at once in worker processes
     (:func:`bayesgloss.pool.process_pool`; the fits are the same, each
     with ``seed``), ``progress`` then called with (fits done, fits).
-    ``overcast_variants`` (None: :data:`DEFAULT_OVERCAST_VARIANTS`): where
-    gensky's overcast sky has the most weight,
-    also fit :data:`OVERCAST_VARIANTS`, stack all the fits again, and share
+    ``overcast_variants`` (None: :data:`DEFAULT_OVERCAST_VARIANTS`): fit
+    :data:`FIRST_STACK_OVERCAST` in the first stack, and where an overcast
+    shape (:data:`OVERCAST_GROUP`) has the most weight, also fit the rest
+    of :data:`OVERCAST_VARIANTS` (and run on in full those the screen had
+    kept early), stack all the fits again, and share
     the overcast shapes' weight among them by how well each predicts
     (:func:`share_within`). ``unreliable_loo``: ``"equal"`` (the default)
     gives every fit the same weight where the stacking weights rest on
@@ -640,15 +651,21 @@ def fit_families(
     if unreliable_loo not in ("stack", "equal"):
         raise ValueError(f"unreliable_loo must be 'stack' or 'equal', not {unreliable_loo!r}")
     args = (b, curves, y, usable, censored, keep)
+    if overcast_variants is None:
+        overcast_variants = DEFAULT_OVERCAST_VARIANTS
     names = FAMILIES + (PEREZ_FAMILIES if perez_families else ())
+    names += FIRST_STACK_OVERCAST if overcast_variants else ()
     fits, stopped, scores = _fit_screened(
         names, args, seed, options, progress, jobs, unreliable_loo
     )
     scores = scores or loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
-    if overcast_variants is None:
-        overcast_variants = DEFAULT_OVERCAST_VARIANTS
-    if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) == "gensky-overcast":
-        fits |= _fit_each(OVERCAST_VARIANTS, args, seed, options, progress, jobs)
+    if overcast_variants and max(scores, key=lambda n: scores[n]["weight"]) in OVERCAST_GROUP:
+        rest = tuple(name for name in OVERCAST_VARIANTS if name not in fits)
+        fits |= _fit_each(rest, args, seed, options, progress, jobs)
+        early = [name for name in stopped if name in OVERCAST_GROUP]  # run in full, as the rest
+        if early:
+            fits |= _run_on(early, fits, args, seed, options, progress, jobs)
+            stopped = [name for name in stopped if name not in early]
         scores = loo_stacking_weights({name: fit[0] for name, fit in fits.items()})
         scores = share_within(scores, {name: fits[name][0] for name in OVERCAST_GROUP}, seed)
     share = high_k_share(scores)

@@ -73,6 +73,7 @@ SETS = {
     "validation_holdout19": "validation_holdout19",
     "validation_holdout20": "validation_holdout20",
     "validation_holdout21": "validation_holdout21",
+    "validation_holdout22": "validation_holdout22",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -92,7 +93,7 @@ METHODS = (
     "baseline", "fixed", "per-frame", "families", "ground-kept", "overcast-variants",
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
-    "radiance-ward", "within-10", "in-lobe", "cie-overcast",
+    "radiance-ward", "within-10", "in-lobe", "cie-overcast", "sun-side-overcast",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -123,6 +124,9 @@ SCORED_ELSEWHERE = {
     # holdout 21's candidate, branch cie-overcast: --overcast-variants on by default,
     # its shapes CIE types 2, 3, 4 and the uniform sky (bayesgloss.sky_families)
     "cie-overcast": "perez",
+    # holdout 22's candidate (studies/patches/sun-side-overcast.patch): CIE
+    # types 2 and 4 in the first sky stack (sky_families.FIRST_STACK_OVERCAST)
+    "sun-side-overcast": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -201,6 +205,7 @@ DEFAULT_METHODS = {
     "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
     "validation_holdout20": ("baseline", "perez"),  # the default after holdout 21, measured
     "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
+    "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged
 }
 
 

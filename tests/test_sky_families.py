@@ -246,6 +246,48 @@ def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypat
     assert set(fam["families"]) == set(sky_families.FAMILIES)
 
 
+def test_first_stack_overcast_shapes_win_a_day_the_first_stack_misreads(monkeypatch):
+    # holdout 22's candidate: the CIE types 2 and 4 fitted in the first
+    # stack (FIRST_STACK_OVERCAST). A day best predicted by CIE type 2 and
+    # next by the per-frame mixture (as holdout 21's vs06): without the
+    # candidate the first stack never fits CIE 2 and auto wins; with it, CIE
+    # 2 wins, so an overcast shape has the most weight and the rest of the
+    # variants are fitted (once each) and share the group's weight; the
+    # screen's early stop of CIE 4 (far behind, unconverged) is run on in
+    # full, as the variants fitted after the first stack are
+    from bayesgloss.sampling import first_check
+
+    args = (None,) * 6 + (0, {})
+    dens = {"cie-2": -1.0, "auto": -3.0, "cie-4": -19.0}
+    calls = _fake_family_fits(monkeypatch, dens)
+    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
+    assert sky_families.FIRST_STACK_OVERCAST == ()  # the default: not in the first stack
+    assert fam["most_weight"] == "auto" and "cie-2" not in fam["families"]
+
+    monkeypatch.setattr(sky_families, "FIRST_STACK_OVERCAST", ("cie-2", "cie-4"))
+    log = []
+    _fake_family_fits(monkeypatch, dens, unconverged=("cie-4",), log=log)
+    idata, _, _, fam = sky_families.fit_families(
+        *args, overcast_variants=True, perez_families=False
+    )
+    first = first_check()
+    names = [*sky_families.FAMILIES, "cie-2", "cie-4"]
+    assert log[: len(names)] == [(name, first, False) for name in names]
+    assert log[len(names) :] == [("cie-3", None, False), ("gensky-uniform", None, False)] + [
+        ("cie-4", None, True)
+    ]
+    assert fam["most_weight"] == "cie-2" and fam["stopped_early"] == []
+    assert set(fam["families"]) == set(names) | {"cie-3", "gensky-uniform"}
+    assert fam["families"]["cie-2"]["weight"] > 0.99
+    assert fam["families"]["cie-2"]["share"] > 0.99  # shared within the overcast group
+    own = 0.1 * (names.index("cie-2") + 1)  # each fake fit's gamma: 0.1 x its place
+    assert np.all(idata.posterior["gamma_object"].values == pytest.approx(own))
+    # the option off: neither in the first stack nor after it
+    calls = _fake_family_fits(monkeypatch, dens)
+    sky_families.fit_families(*args, overcast_variants=False, perez_families=False)
+    assert calls == list(sky_families.FAMILIES)
+
+
 def test_cli_carries_overcast_variants_to_the_estimate(tmp_path, monkeypatch):
     # one bundle: the flag reaches estimate_bundle; several: each unit's options
     # (absent where not given, so that earlier runs keep their keys) and,
