@@ -105,7 +105,9 @@ Units: radiance in W sr^-1 m^-2 (Radiance's units; luminance = 179 x).
 
 from __future__ import annotations
 
+import collections
 import functools
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -202,11 +204,20 @@ def view_geometry(facets: Facets, camera_position, occluder=None) -> ViewGeometr
     return ViewGeometry(normal, view_directions(center, camera_position), center, occ)
 
 
+#: Ground shadows already found, by the digest of their arguments: the bases
+#: of every sky model of a fit (the sun's, the sky's, the other shapes') and
+#: every fit of a process ask for the same points, suns and object
+#: (:func:`ground_shadow`); least recently used dropped beyond the byte limit.
+_SHADOWS: collections.OrderedDict = collections.OrderedDict()
+_SHADOW_BYTES = 256 * 2**20
+
+
 def ground_shadow(points, sun_direction, occluder) -> np.ndarray:
     """Whether ground points lie in the shadow of a convex object.
 
     The shadow of a convex object on the plane z = 0 is the convex hull of its
-    vertices projected along the sun direction.
+    vertices projected along the sun direction. Answers are kept (a
+    read-only array, by the digest of the arguments) and given again.
 
     Parameters
     ----------
@@ -223,16 +234,35 @@ def ground_shadow(points, sun_direction, occluder) -> np.ndarray:
     """
     from scipy.spatial import ConvexHull
 
-    p = np.asarray(points, dtype=float)
-    sun = np.atleast_2d(np.asarray(sun_direction, dtype=float))
-    v = np.asarray(occluder, dtype=float)
+    p = np.ascontiguousarray(points, dtype=float)
+    sun = np.ascontiguousarray(np.atleast_2d(sun_direction), dtype=float)
+    v = np.ascontiguousarray(occluder, dtype=float)
+    digest = hashlib.blake2b(digest_size=16)
+    for a in (p, sun, v):
+        digest.update(repr(a.shape).encode())
+        digest.update(a.tobytes())
+    key = digest.hexdigest()
+    if key in _SHADOWS:
+        _SHADOWS.move_to_end(key)
+        return _SHADOWS[key]
     out = np.zeros(p.shape[:-1] + (len(sun),), dtype=bool)
+    x, y = p[..., 0], p[..., 1]
     for t, s in enumerate(sun):
         if s[2] <= 1e-6:
             continue
         proj = v[:, :2] - (v[:, 2:3] / s[2]) * s[:2]  # along -s down to z = 0
         eq = ConvexHull(proj).equations  # a x + b y + c <= 0 inside
-        out[..., t] = np.max(p @ eq[:, :2].T + eq[:, 2], axis=-1) <= 0
+        # only points within the shadow's bounding box (widened by far more
+        # than rounding) can be inside: the rest are outside by more than
+        # any rounding of the test, which is the same sum for those tested
+        lo, hi = proj.min(0), proj.max(0)
+        pad = 1e-9 * (1.0 + np.abs(proj).max())
+        near = (x >= lo[0] - pad) & (x <= hi[0] + pad) & (y >= lo[1] - pad) & (y <= hi[1] + pad)
+        out[near, t] = np.max(p[near] @ eq[:, :2].T + eq[:, 2], axis=-1) <= 0
+    out.flags.writeable = False  # kept: shared by every caller
+    _SHADOWS[key] = out
+    while sum(a.nbytes for a in _SHADOWS.values()) > _SHADOW_BYTES and len(_SHADOWS) > 1:
+        _SHADOWS.popitem(last=False)
     return out
 
 
