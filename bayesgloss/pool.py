@@ -12,7 +12,7 @@ import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["process_pool", "shares"]
+__all__ = ["process_pool", "one_blas_thread", "shares"]
 
 
 def process_pool(jobs: int) -> ProcessPoolExecutor:
@@ -20,7 +20,8 @@ def process_pool(jobs: int) -> ProcessPoolExecutor:
     them dies: on Linux each worker asks the kernel for SIGTERM on its
     parent's death (``prctl(PR_SET_PDEATHSIG)``), so a run killed with
     ``kill -9`` leaves no workers computing on (Ctrl-C already reaches the
-    whole process group).
+    whole process group). Each worker runs its linear algebra on one thread
+    (:func:`one_blas_thread`).
 
     Parameters
     ----------
@@ -32,8 +33,28 @@ def process_pool(jobs: int) -> ProcessPoolExecutor:
     )
 
 
+def one_blas_thread() -> None:
+    """Limit this process's BLAS (numpy's OpenBLAS) to one thread.
+
+    The workers of :func:`process_pool` already share the machine's cores
+    among themselves: OpenBLAS's own threads, one per core in every process,
+    wait for work by spinning, and with two processes on two cores (a
+    validation run's two arms, ``--jobs 2``'s two chains) the spinning took
+    two thirds of the CPU as system time (``vmstat``, stop 58), where one
+    thread a process left it at none. The model's matrix products are small
+    (a few facets or quadrature cells by a few frames): a second thread never
+    paid for itself.
+    """
+    import numpy  # noqa: F401 (loads OpenBLAS, so that a spawned worker's is limited too)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+
+
 def _end_with_parent(parent: int) -> None:
-    """Worker initializer of :func:`process_pool`."""
+    """Worker initializer of :func:`process_pool`: one BLAS thread
+    (:func:`one_blas_thread`), and the end with the parent."""
+    one_blas_thread()
     if not sys.platform.startswith("linux"):
         return
     import ctypes

@@ -40,12 +40,12 @@ import argparse
 import json
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from bayesgloss.intervals import reported_interval
+from bayesgloss.pool import process_pool
 
 HERE = Path(__file__).parent
 #: The sets: the 48-sequence validation set, and the 24-sequence holdout drawn
@@ -881,7 +881,7 @@ def main(argv=None) -> None:
         summary = write_summary(list(committed.values()), args.set, saved["max_sweeps"])
     else:
         paths = sorted(p for p in bundles.iterdir() if (p / "sequence.json").exists())
-        with ProcessPoolExecutor(args.jobs) as pool:
+        with process_pool(args.jobs) as pool:  # one BLAS thread a worker: arms run side by side
             n = len(paths)
             scores = list(
                 pool.map(
