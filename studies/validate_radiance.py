@@ -205,7 +205,7 @@ DEFAULT_METHODS = {
     "validation_holdout19": ("baseline", "perez"),  # the default after stop 55, measured
     "validation_holdout20": ("baseline", "perez"),  # the default after holdout 21, measured
     "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
-    "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged
+    "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged (stop 58)
 }
 
 

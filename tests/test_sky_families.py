@@ -220,11 +220,14 @@ def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypat
     # uniform one takes the weight (an implementation that fitted the
     # variants always, never, or did not restack would fail one of these)
     args = (None,) * 6 + (0, {})
+    first = [*sky_families.FAMILIES, *sky_families.FIRST_STACK_OVERCAST]
+    rest = [n for n in sky_families.OVERCAST_VARIANTS if n not in first]
+    assert rest == ["cie-3", "gensky-uniform"]  # since holdout 22, CIE 2 and 4 in the first stack
     calls = _fake_family_fits(monkeypatch, {"gensky-uniform": -1.0, "gensky-overcast": -2.0})
     idata, _, _, fam = sky_families.fit_families(
         *args, overcast_variants=True, perez_families=False
     )
-    assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
+    assert calls == [*first, *rest]
     assert fam["most_weight"] == "gensky-uniform"
     assert fam["families"]["gensky-uniform"]["weight"] > 0.99
     own = 0.1 * (calls.index("gensky-uniform") + 1)  # each fake fit's gamma: 0.1 x its place
@@ -233,22 +236,22 @@ def test_overcast_variants_are_fitted_only_where_the_overcast_sky_wins(monkeypat
     calls.clear()
     sky_families.fit_families(*args, overcast_variants=None, perez_families=False)
     assert sky_families.DEFAULT_OVERCAST_VARIANTS is True
-    assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
+    assert calls == [*first, *rest]
     # the option off: the four only, the overcast sky chosen
     calls.clear()
     _, _, _, fam = sky_families.fit_families(*args, overcast_variants=False, perez_families=False)
     assert calls == list(sky_families.FAMILIES)
     assert fam["most_weight"] == "gensky-overcast"
-    # a sun-lit day (the clear sky wins): the variants are not fitted, whatever the option
+    # a sun-lit day (the clear sky wins): only the first stack's shapes are fitted
     calls = _fake_family_fits(monkeypatch, {"gensky-clear": -1.0, "gensky-uniform": 0.0})
     _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
-    assert calls == list(sky_families.FAMILIES)
-    assert set(fam["families"]) == set(sky_families.FAMILIES)
+    assert calls == first
+    assert set(fam["families"]) == set(first)
 
 
 def test_first_stack_overcast_shapes_win_a_day_the_first_stack_misreads(monkeypatch):
-    # holdout 22's candidate: the CIE types 2 and 4 fitted in the first
-    # stack (FIRST_STACK_OVERCAST). A day best predicted by CIE type 2 and
+    # the CIE types 2 and 4 fitted in the first stack (FIRST_STACK_OVERCAST;
+    # holdout 22's candidate, the default since stop 58). A day best predicted by CIE type 2 and
     # next by the per-frame mixture (as holdout 21's vs06): without the
     # candidate the first stack never fits CIE 2 and auto wins; with it, CIE
     # 2 wins, so an overcast shape has the most weight and the rest of the
@@ -259,12 +262,15 @@ def test_first_stack_overcast_shapes_win_a_day_the_first_stack_misreads(monkeypa
 
     args = (None,) * 6 + (0, {})
     dens = {"cie-2": -1.0, "auto": -3.0, "cie-4": -19.0}
-    calls = _fake_family_fits(monkeypatch, dens)
-    _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
-    assert sky_families.FIRST_STACK_OVERCAST == ()  # the default: not in the first stack
+    assert sky_families.FIRST_STACK_OVERCAST == ("cie-2", "cie-4")  # the default since stop 58
+    with monkeypatch.context() as before:  # as before holdout 22: not in the first stack
+        before.setattr(sky_families, "FIRST_STACK_OVERCAST", ())
+        _fake_family_fits(before, dens)
+        _, _, _, fam = sky_families.fit_families(
+            *args, overcast_variants=True, perez_families=False
+        )
     assert fam["most_weight"] == "auto" and "cie-2" not in fam["families"]
 
-    monkeypatch.setattr(sky_families, "FIRST_STACK_OVERCAST", ("cie-2", "cie-4"))
     log = []
     _fake_family_fits(monkeypatch, dens, unconverged=("cie-4",), log=log)
     idata, _, _, fam = sky_families.fit_families(
@@ -340,7 +346,8 @@ def test_a_hazy_perez_day_is_told_hazy_perez(tmp_path):
         tmp_path / "b", "perez-turbid", perez_families=True
     )
     fam = res.summary["sky_families"]
-    assert set(fam["families"]) == {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
+    every = {*sky_families.FAMILIES, *sky_families.PEREZ_FAMILIES}
+    assert set(fam["families"]) == every | set(sky_families.FIRST_STACK_OVERCAST)
     assert fam["most_weight"] == "perez-turbid", fam
     assert fam["families"]["perez-turbid"]["weight"] > 0.8, fam
 
@@ -418,17 +425,17 @@ def test_tied_overcast_shapes_share_their_weight(monkeypatch):
     idata, _, _, fam = sky_families.fit_families(
         *args, overcast_variants=True, perez_families=False
     )
-    assert calls == [*sky_families.FAMILIES, *sky_families.OVERCAST_VARIANTS]
+    assert calls == [*sky_families.FAMILIES, "cie-2", "cie-4", "cie-3", "gensky-uniform"]
     assert sky_families.OVERCAST_GROUP == (
         "gensky-overcast", "cie-2", "cie-3", "cie-4", "gensky-uniform"
     )  # fmt: skip
     w = [fam["families"][name]["weight"] for name in sky_families.OVERCAST_GROUP]
     np.testing.assert_allclose(w, [1 / 3, 0, 1 / 3, 0, 1 / 3], atol=0.01)
     assert sum(f["weight"] for f in fam["families"].values()) == pytest.approx(1.0)
-    # each fit's gamma is 0.1 x its place in the calls: 0.4 (overcast), 0.6
-    # (CIE 3), 0.8 (uniform); CIE 2's 0.5 and CIE 4's 0.7 are not in the mixture
+    # each fit's gamma is 0.1 x its place in the calls: 0.4 (overcast), 0.7
+    # (CIE 3), 0.8 (uniform); CIE 2's 0.5 and CIE 4's 0.6 are not in the mixture
     gamma = idata.posterior["gamma_object"].values
-    np.testing.assert_allclose(np.unique(gamma.round(9)), [0.4, 0.6, 0.8])
+    np.testing.assert_allclose(np.unique(gamma.round(9)), [0.4, 0.7, 0.8])
     # members far apart keep the better one's weight: 12 entries 1 nat apart each
     calls = _fake_family_fits(monkeypatch, {**near, "gensky-uniform": 0.0})
     _, _, _, fam = sky_families.fit_families(*args, overcast_variants=True, perez_families=False)
