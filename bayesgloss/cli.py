@@ -615,8 +615,9 @@ def _parser() -> argparse.ArgumentParser:
         help="the sky's shape (default: 'measured', the Perez sky of the bundle's "
         "frames[].irradiance, where it has them; else 'families': the object fitted with "
         "each frame's sky a mixture of gensky's clear, intermediate and overcast skies "
-        "('auto'), under each of the three all day and under the clear and turbid Perez "
-        "skies (--no-perez-families: not these two), the fits stacked by PSIS-LOO "
+        "('auto'), under each of the three all day, under the clear and turbid Perez "
+        "skies (--no-perez-families: not these two) and under CIE's overcast types 2 "
+        "and 4 (--no-overcast-variants: not these), the fits stacked by PSIS-LOO "
         "(bayesgloss.sky_families); gensky-clear with --fixed-brightness; or one of "
         + ", ".join(sky.sky_models())
         + ")",
