@@ -705,10 +705,11 @@ def _parser() -> argparse.ArgumentParser:
         "--overcast-variants",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help="with the sky families (the default sky): where gensky's overcast sky wins, "
-        f"also fit the CIE overcast shapes {', '.join(OVERCAST_VARIANTS)}, their weight "
-        "shared by pseudo-BMA+ (bayesgloss.sky_families; the default since holdout 21, "
-        "16 unseen sunless days; --no-overcast-variants: gensky's overcast shape alone)",
+        help="with the sky families (the default sky): also fit the CIE overcast shapes "
+        f"{', '.join(OVERCAST_VARIANTS)}, types 2 and 4 in the first stack (since holdout 22) "
+        "and the rest where an overcast shape wins it, their weight shared by pseudo-BMA+ "
+        "(bayesgloss.sky_families; the default since holdout 21, 16 unseen sunless days; "
+        "--no-overcast-variants: gensky's overcast shape alone)",
     )
     es.add_argument(
         "--perez-families",

@@ -282,8 +282,8 @@ def estimate_bundle(
         ``faces-ground`` (unless no other facet is usable), or kept; default
         :data:`bayesgloss.ground_facing.DEFAULT_GROUND_FACING`.
     overcast_variants : bool, optional
-        With the sky families: also :data:`~bayesgloss.sky_families.OVERCAST_VARIANTS` where
-        the overcast sky wins (default: :data:`~.sky_families.DEFAULT_OVERCAST_VARIANTS`).
+        With the sky families: :data:`~.sky_families.OVERCAST_VARIANTS` too, types 2 and 4 in
+        the first stack, the rest where an overcast shape wins (None: sky_families' default).
     perez_families : bool, optional
         With the sky families: also :data:`~bayesgloss.sky_families.PEREZ_FAMILIES`
         (:func:`~bayesgloss.sky_families.perez_families_for`; default: yes).

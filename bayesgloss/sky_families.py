@@ -136,7 +136,7 @@ __all__ = [
 #: intermediate and overcast skies each all day.
 FAMILIES = ("auto", *AUTO_SKIES)
 
-#: Overcast shapes fitted as well where gensky's overcast sky wins the stack
+#: Overcast shapes fitted as well where an overcast shape wins the stack
 #: of :data:`FAMILIES` (``fit_families(..., overcast_variants=True)``, the
 #: default of ``estimate`` since holdout 21, :data:`DEFAULT_OVERCAST_VARIANTS`):
 #: the CIE general skies of types 2, 3 and 4 and gensky's uniform sky (CIE
@@ -153,12 +153,13 @@ FAMILIES = ("auto", *AUTO_SKIES)
 #: three gradations' fits tie within a nat) but do tell the indicatrix (on a
 #: seen gensky-overcast day the types 2 and 4 were 235 nats behind), so
 #: :func:`share_within` shares the group's weight by how well each predicts.
-#: Fitted only where the overcast sky wins, the sun-lit days pay nothing.
+#: Fitted only where an overcast shape wins, the sun-lit days pay nothing,
+#: except for those of :data:`FIRST_STACK_OVERCAST` (since stop 58).
 #: Until holdout 21 they were CIE type 3 and the uniform sky, and opt-in (on
 #: holdouts 4 and 5, 24 unseen sunless days, they held the truth as often as
 #: the default, with a higher MAE).
 OVERCAST_VARIANTS = ("cie-2", "cie-3", "cie-4", "gensky-uniform")
-#: Whether ``estimate`` fits :data:`OVERCAST_VARIANTS` where the overcast sky
+#: Whether ``estimate`` fits :data:`OVERCAST_VARIANTS` where an overcast shape
 #: wins (``estimate --no-overcast-variants``: not): yes since holdout 21
 #: (16 unseen sunless Radiance days, rule written before they were drawn;
 #: studies/README.md, "Holdout 21"): the reported interval held the truth
