@@ -81,7 +81,7 @@ from scipy import special
 
 from . import fresnel as fr
 from . import likelihood as lk
-from . import lobes, render
+from . import lobes, pool, render
 from .gamma_interval import log_gamma_interval, tail_cuts
 
 __all__ = [
@@ -244,6 +244,7 @@ def illumination_bases(
     *,
     lobe_family="phong",
     fresnel="radiance",
+    jobs=1,
     **kwargs,
 ) -> IlluminationBases:
     """Forward-model bases of the sun of ``day``, its sky, and other skies'.
@@ -266,6 +267,11 @@ def illumination_bases(
         (:data:`bayesgloss.fresnel.FRESNEL_RISES`), for a one-material model
         with that Fresnel model; ``"schlick-lobe"`` (GGX only) adds G^S of
         each source (:attr:`bayesgloss.fresnel.FresnelTerms.glossy_rise`).
+    jobs : int
+        Worker processes (:func:`bayesgloss.pool.process_pool`): the facets
+        are split into that many blocks, each block's bases of every source
+        found in a worker of its own. The bases are the same whatever
+        ``jobs`` (each facet's quadrature is its own).
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...). ``occlusion`` (a
@@ -277,18 +283,64 @@ def illumination_bases(
 
     if not isinstance(others, (list, tuple)):
         others = (others,)
+    if fresnel in fr.IN_LOBE and lobe_family != fr.IN_LOBE[fresnel]:
+        raise ValueError(
+            f"Fresnel model {fresnel!r} takes the rise inside the "
+            f"{fr.IN_LOBE[fresnel]!r} lobe, not the {lobe_family!r} lobe"
+        )
+    args = (day, exponents, tuple(others), lobe_family, fresnel in fr.IN_LOBE)
+    blocks = np.array_split(np.arange(len(geometry)), max(1, min(jobs, len(geometry) // 8)))
+    if len(blocks) == 1:
+        d_parts, g_parts, r_parts = _source_bases(geometry, *args, kwargs)
+    else:  # each block of facets in a worker of its own, joined along the facets
+        occlusion = kwargs.get("occlusion")
+        block_kw = [
+            kwargs if occlusion is None else kwargs | {"occlusion": occlusion.take(rows)}
+            for rows in blocks
+        ]
+        with pool.process_pool(len(blocks)) as workers:
+            done = list(
+                workers.map(
+                    _source_bases,
+                    [geometry.take(rows) for rows in blocks],
+                    *([a] * len(blocks) for a in args),
+                    block_kw,
+                )
+            )
+        d_parts, g_parts, r_parts = (
+            None if done[0][i] is None else np.concatenate([b[i] for b in done], axis=1)
+            for i in range(3)
+        )
+    e_a = horizontal_irradiance(split_sky(day)[1], include_sun=False)
+    sun_a = np.broadcast_to(day.solar_radiance, e_a.shape)
+    ratios = [np.zeros(e_a.shape)]
+    for second in others:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = np.log(np.broadcast_to(second.solar_radiance, e_a.shape) / sun_a)
+        ratios.append(np.where(np.isfinite(r), r, IlluminationPriors().sun_cloud_mean))
+    sun_dir, e_sun = render._sun_terms(day)  # the disc's normal irradiance, 0 below the horizon
+    terms = _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun, fresnel), kwargs.get("occlusion"))
+    if r_parts is not None:
+        terms = dataclasses.replace(terms, glossy_rise=r_parts)
+    exps = np.sort(np.atleast_1d(np.asarray(exponents, dtype=float)))
+    return IlluminationBases(d_parts, g_parts, exps, 1 + len(others), np.stack(ratios), terms)
+
+
+def _source_bases(geometry, day, exponents, others, lobe_family, with_rise, kwargs):
+    """The bases of :func:`illumination_bases` by source (the sun of ``day``,
+    its sky, each of ``others``' skies scaled to its diffuse horizontal
+    irradiance; with one sky model a copy of it second): diffuse (P, F, T),
+    glossy (P, F, N, T), and with ``with_rise`` the GGX lobe's Schlick rise
+    G^S (P, F, N, T), else None."""
+    from .sky import horizontal_irradiance
+
     sun_only, sky_a = split_sky(day)
 
     def bases(d):
         return lobes.facet_bases(geometry, d, exponents, family=lobe_family, **kwargs)
 
     rise = None
-    if fresnel in fr.IN_LOBE:  # G^S of each source beside its glossy part
-        if lobe_family != fr.IN_LOBE[fresnel]:
-            raise ValueError(
-                f"Fresnel model {fresnel!r} takes the rise inside the "
-                f"{fr.IN_LOBE[fresnel]!r} lobe, not the {lobe_family!r} lobe"
-            )
+    if with_rise:  # G^S of each source beside its glossy part
         kept = ("ground", "ground_reflectance", "occlusion")
 
         def rise(d):
@@ -304,12 +356,7 @@ def illumination_bases(
         g_parts.append(g_parts[1])
         r_parts = r_parts + r_parts[1:2]
     e_a = horizontal_irradiance(sky_a, include_sun=False)
-    sun_a = np.broadcast_to(day.solar_radiance, e_a.shape)
-    ratios = [np.zeros(e_a.shape)]
     for second in others:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            r = np.log(np.broadcast_to(second.solar_radiance, e_a.shape) / sun_a)
-        ratios.append(np.where(np.isfinite(r), r, IlluminationPriors().sun_cloud_mean))
         sky_b = split_sky(second)[1]
         other = bases(sky_b)
         e_b = horizontal_irradiance(sky_b, include_sun=False)
@@ -319,18 +366,7 @@ def illumination_bases(
         g_parts.append(other.glossy * factor)
         if rise is not None:
             r_parts.append(rise(sky_b) * factor)
-    sun_dir, e_sun = render._sun_terms(day)  # the disc's normal irradiance, 0 below the horizon
-    terms = _sunlit(fr.fresnel_terms(geometry, sun_dir, e_sun, fresnel), kwargs.get("occlusion"))
-    if rise is not None:
-        terms = dataclasses.replace(terms, glossy_rise=np.stack(r_parts))
-    return IlluminationBases(
-        np.stack(d_parts),
-        np.stack(g_parts),
-        parts[0].exponents,
-        1 + len(others),
-        np.stack(ratios),
-        terms,
-    )
+    return np.stack(d_parts), np.stack(g_parts), np.stack(r_parts) if r_parts else None
 
 
 def _sunlit(terms, occlusion):

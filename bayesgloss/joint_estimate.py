@@ -111,6 +111,7 @@ def joint_inputs(
     occluder_albedo=None,
     ground_shadow=DEFAULT_GROUND_SHADOW,
     clipped=DEFAULT_CLIPPED,
+    jobs=1,
 ):
     """The joint model's data (:func:`bayesgloss.illumination.joint_data`) of
     the usable facets ``keep`` (a mask, or indices: taken in increasing
@@ -123,7 +124,8 @@ def joint_inputs(
     shadow on the ground where ``ground_shadow`` is ``"convex"``
     (:mod:`bayesgloss.object_shadow`), and the clipped entries left out or
     kept as censored (``clipped``, :data:`CLIPPED`): (data, frames used (T,)
-    of bool, sky model names)."""
+    of bool, sky model names). ``jobs``: worker processes for the bases
+    (:func:`bayesgloss.illumination.illumination_bases`)."""
     clipped = check_clipped(clipped)
     which = np.zeros(len(b.facets), dtype=bool)
     which[keep] = True
@@ -156,6 +158,7 @@ def joint_inputs(
         fresnel="radiance" if fresnel == "none" else fresnel,
         ground=ground,
         ground_reflectance=rho,
+        jobs=jobs,
         **mesh,
     )
     if owner is None:
@@ -211,8 +214,9 @@ def joint_fit(
     stacked sky families need it of one fit only). ``resume``: the samples
     of a fit with the same arguments stopped at its cap unconverged, run on
     to ``options``' cap (:func:`bayesgloss.sampling.schedule.run_chain`).
-    ``jobs``: worker processes for the sampler's groups of ensembles (the
-    draws do not depend on it).
+    ``jobs``: worker processes for the bases (split by facets) and the
+    sampler's groups of ensembles (the draws do not depend on it but for a
+    matrix product's last bits: :func:`bayesgloss.illumination.illumination_bases`).
     """
     az = arviz()
     options = dict(options or {})
@@ -222,7 +226,7 @@ def joint_fit(
     shadow = options.pop("ground_shadow", DEFAULT_GROUND_SHADOW)
     clipped = options.pop("clipped", DEFAULT_CLIPPED)
     data, used, names = joint_inputs(
-        b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow, clipped
+        b, y, usable, censored, keep, illumination, fresnel, family, albedo, shadow, clipped, jobs
     )
     options["max_sweeps"] = joint_max_sweeps(options)
     options.pop("max_steps", None)

@@ -182,6 +182,12 @@ class ViewGeometry:
     def __len__(self) -> int:
         return len(self.normal)
 
+    def take(self, facets) -> ViewGeometry:
+        """The same for a subset of the facets (an index array or a bool
+        mask); the occluder is the whole object's still."""
+        center = None if self.center is None else self.center[facets]
+        return ViewGeometry(self.normal[facets], self.view_direction[facets], center, self.occluder)
+
 
 def view_geometry(facets: Facets, camera_position, occluder=None) -> ViewGeometry:
     """Normals and view directions of facets seen from a camera position [m].

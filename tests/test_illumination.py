@@ -244,3 +244,56 @@ def test_shared_sigma_marginal_is_the_integral_over_one_sigma(paper_split):
     inv_var = np.exp(-2 * draws[0, 0])
     # Gamma(k, rate Q / 2): sd of the mean of 4000 is sqrt(k) / (Q / 2) / 63
     assert abs(inv_var.mean() - n / q) < 4 * np.sqrt(n / 2) / (q / 2) / np.sqrt(4000)
+
+
+def test_bases_found_in_two_workers_are_the_bases_found_in_one(paper_three_skies):
+    # jobs=2 splits the facets into two blocks, each block's bases of every
+    # source found in a worker of its own, joined along the facets: each
+    # facet's quadrature is its own, so the bases are the one process's
+    # (the workers' one BLAS thread may change a matrix product's last bits:
+    # rtol 1e-12, a million times finer than any basis difference the model
+    # reads); also with the GGX lobe's Schlick rise, a third array to join
+    from conftest import paper_three_skies_bases
+
+    one, _ = paper_three_skies
+    assert one.diffuse.shape[1] >= 16  # enough facets for two blocks
+    two, _, _ = paper_three_skies_bases(jobs=2)
+    for a, b in ((one.diffuse, two.diffuse), (one.glossy, two.glossy)):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * a.max())
+    np.testing.assert_array_equal(two.log_sun_ratio, one.log_sun_ratio)
+    np.testing.assert_array_equal(two.fresnel.view, one.fresnel.view)
+    kw = {"lobe_family": "ggx", "fresnel": "schlick-lobe", "exponents": [2.0, 30.0, 400.0]}
+    rise_one, _, _ = paper_three_skies_bases(**kw)
+    rise_two, _, _ = paper_three_skies_bases(jobs=2, **kw)
+    a, b = rise_one.fresnel.glossy_rise, rise_two.fresnel.glossy_rise
+    assert a.shape == b.shape and a.max() > 0
+    np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * a.max())
+
+
+def test_bases_of_facet_blocks_join_to_the_bases_of_all(tmp_path):
+    # the split of illumination_bases' workers, in one process: each block's
+    # geometry (ViewGeometry.take) and mesh occlusion (Occlusion.take) give
+    # its facets' rows of the whole's bases exactly, on a bundle whose
+    # object_mesh shades some facets (the occlusion's per-facet rays must
+    # follow their facets into the block)
+    from test_visibility import read, write_mesh_bundle
+
+    from bayesgloss import sky, visibility
+
+    b = read(write_mesh_bundle(tmp_path, "mesh"))
+    occ = visibility.bundle_occlusion(b)
+    g = b.view_geometry()
+    day = sky.daylight("gensky-clear", b.sun_direction, ground_reflectance=b.ground_albedo)
+    other = sky.daylight("gensky-overcast", b.sun_direction, ground_reflectance=b.ground_albedo)
+    args = (day, render.DEFAULT_EXPONENTS, (other,), "phong", False)
+    kw = {"ground_reflectance": b.ground_albedo}
+    whole = il._source_bases(g, *args, kw | {"occlusion": occ})
+    assert (occ.sunlit_fraction == 0).any()  # the mesh shades something
+    for rows in (np.array([0, 2]), np.array([1, 3])):
+        part = il._source_bases(g.take(rows), *args, kw | {"occlusion": occ.take(rows)})
+        np.testing.assert_array_equal(part[0], whole[0][:, rows])
+        np.testing.assert_array_equal(part[1], whole[1][:, rows])
+    # and a block of the convex model's own: the same rows
+    plain = il._source_bases(g.take([1, 3]), *args, kw)
+    assert not np.allclose(plain[0], whole[0][:, [1, 3]])  # the mesh matters here
