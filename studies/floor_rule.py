@@ -25,10 +25,17 @@ sunless ones for (3)), sets of one renderer pooled:
     one time in ten, and almost every miss of a narrow interval is
     confident).
 
+With ``--few-facets-floor F`` (stop 59's candidate, "Holdout 23 and
+Mitsuba holdout 10: the floor by facet count" in ``studies/README.md``)
+the candidate's floor is ``F`` where at most :data:`FEW_FACETS` facets
+measured the object's gamma (the score's ``model_error.facets``: too few
+for their disagreement to show the model's error) and ``--floor`` where
+more did.
+
 Usage::
 
     python studies/floor_rule.py --set mitsuba_holdout9 --set validation_holdout20 \\
-        [--floor 0.03] [--cached] [--json FILE]
+        [--floor 0.03] [--few-facets-floor 0.06] [--cached] [--json FILE]
 
 Scores come from the sets' committed results (:data:`validate_radiance.SETS`)
 or, with ``--cached``, from their score caches (``studies/out/<set>/scores``).
@@ -54,6 +61,10 @@ from validate_radiance import _holds as holds  # noqa: E402
 
 #: The candidate floor of the rule (studies/README.md, stop 56).
 CANDIDATE_FLOOR = 0.03
+#: Stop 59's candidate: objects whose gamma at most this many facets
+#: measured keep :data:`FEW_FACETS_FLOOR` (``--few-facets-floor``).
+FEW_FACETS = 3
+FEW_FACETS_FLOOR = 0.06
 #: The seed of the candidate's model-error draws.
 SEED = 20261202
 #: The band of issue 14 for a 90 % interval's coverage, and its centre.
@@ -74,8 +85,20 @@ def load_scores(set_name: str, cached: bool, method: str = "perez") -> list[dict
     return [{**s, "perez": s[method]} for s in scores]
 
 
-def with_floor(entry: dict, floor: float, rng: np.random.Generator) -> dict:
-    """The default's entry with its interval and median widened again at ``floor``."""
+def measuring_facets(entry: dict) -> int:
+    """How many facets measured the object's gamma in a score (its model
+    error's ``facets``)."""
+    return int(entry["model_error"]["facets"])
+
+
+def with_floor(
+    entry: dict, floor: float, rng: np.random.Generator, few_facets_floor: float | None = None
+) -> dict:
+    """The default's entry with its interval and median widened again at
+    ``floor``, or at ``few_facets_floor`` (where given) if at most
+    :data:`FEW_FACETS` facets measured it."""
+    if few_facets_floor is not None and measuring_facets(entry) <= FEW_FACETS:
+        floor = few_facets_floor
     q = widened(entry, floor, rng)
     return {**entry, **{k: q[k] for k in ("median", "q05", "q95", "hdi90")}}
 
@@ -125,8 +148,13 @@ def decide(default: dict, candidate: dict, by_renderer: dict) -> dict:
     return out
 
 
-def apply_rule(sets: dict[str, list[dict]], floor: float = CANDIDATE_FLOOR) -> dict:
-    """The rule on ``sets`` (set name to its scores)."""
+def apply_rule(
+    sets: dict[str, list[dict]],
+    floor: float = CANDIDATE_FLOOR,
+    few_facets_floor: float | None = None,
+) -> dict:
+    """The rule on ``sets`` (set name to its scores); the candidate's floor
+    :func:`with_floor`'s."""
     rng = np.random.default_rng(SEED)
     rows = {"default": {}, "candidate": {}}
     for name, scores in sets.items():
@@ -136,7 +164,7 @@ def apply_rule(sets: dict[str, list[dict]], floor: float = CANDIDATE_FLOOR) -> d
                 raise ValueError(f"{name}: {s['bundle']} has no object quantiles to widen")
             row = (entry, s["truth"], s["direct_sun"])
             rows["default"].setdefault(renderer(name), []).append(row)
-            cand = (with_floor(entry, floor, rng), s["truth"], s["direct_sun"])
+            cand = (with_floor(entry, floor, rng, few_facets_floor), s["truth"], s["direct_sun"])
             rows["candidate"].setdefault(renderer(name), []).append(cand)
     by_renderer = {
         r: {m: figures(rows[m][r]) for m in ("default", "candidate")} for r in rows["default"]
@@ -144,6 +172,8 @@ def apply_rule(sets: dict[str, list[dict]], floor: float = CANDIDATE_FLOOR) -> d
     pooled = {m: figures([x for v in rows[m].values() for x in v]) for m in rows}
     return {
         "floor": floor,
+        "few_facets_floor": few_facets_floor,
+        "few_facets": FEW_FACETS,
         "sets": {name: len(scores) for name, scores in sets.items()},
         "by_renderer": by_renderer,
         "pooled": pooled,
@@ -187,21 +217,83 @@ def choose_floor(sets: dict[str, list[dict]] | None = None) -> dict:
     return {"table": table, "qualifying": good, "chosen": chosen}
 
 
+#: The seen sets stop 59's candidate was found on (sun-lit sequences), each
+#: with the method that was the default when it was read.
+SEEN_STOP59 = {
+    **SEEN,
+    "validation_holdout20": "perez",
+    "validation_holdout22": "sun-side-overcast",
+    "mitsuba_holdout9": "perez",
+}
+#: (floor where at most FEW_FACETS facets measured, floor where more did)
+#: pairs tabulated by :func:`by_facet_count`.
+FACET_FLOORS = ((0.06, 0.06), (0.0, 0.0), (0.03, 0.03), (0.06, 0.02), (0.06, 0.03), (0.06, 0.04))
+
+
+def by_facet_count(sets: dict[str, list[dict]] | None = None) -> dict:
+    """Coverage and median width of the sun-lit reported intervals, per
+    renderer and per group (at most :data:`FEW_FACETS` measuring facets, or
+    more), for each pair of floors of :data:`FACET_FLOORS`, on the seen
+    sets of :data:`SEEN_STOP59` (stop 59's lead, ``--by-facets``)."""
+    if sets is None:
+        sets = {
+            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
+            for name, method in SEEN_STOP59.items()
+        }
+    table = {}
+    for few_floor, floor in FACET_FLOORS:
+        rng = np.random.default_rng(SEED)
+        cells = {}
+        for name, scores in sets.items():
+            for s in scores:
+                entry = with_floor(s["perez"], floor, rng, few_floor)
+                group = "few" if measuring_facets(s["perez"]) <= FEW_FACETS else "more"
+                for key in (f"{renderer(name)}:{group}", renderer(name)):
+                    cells.setdefault(key, []).append((entry, s["truth"]))
+        table[f"{few_floor}/{floor}"] = {
+            key: {
+                "held": int(sum(bool(holds(e, t)) for e, t in rows)),
+                "n": len(rows),
+                "median_width": float(np.median([np.ptp(reported_interval(e)) for e, _ in rows])),
+                "mae": float(np.mean([abs(e["median"] - t) for e, t in rows])),
+            }
+            for key, rows in sorted(cells.items())
+        }
+    return {"sets": {k: len(v) for k, v in sets.items()}, "few_facets": FEW_FACETS, "table": table}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", action="append", default=[], choices=sorted(SETS))
     ap.add_argument("--floor", type=float, default=CANDIDATE_FLOOR)
+    ap.add_argument(
+        "--few-facets-floor",
+        type=float,
+        help=f"the candidate's floor where at most {FEW_FACETS} facets measured gamma",
+    )
     ap.add_argument("--cached", action="store_true", help="scores from studies/out/<set>/scores")
     ap.add_argument("--json", help="write the result here")
     ap.add_argument(
         "--choose", action="store_true", help="print how the candidate floor was chosen (SEEN)"
     )
+    ap.add_argument(
+        "--by-facets",
+        action="store_true",
+        help="tabulate the floors by facet count on the seen sets (SEEN_STOP59)",
+    )
     args = ap.parse_args(argv)
+    if args.by_facets:
+        out = by_facet_count()
+        print(json.dumps(out, indent=1))
+        if args.json:
+            Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+        return out
     if args.choose:
         out = choose_floor()
         print(json.dumps(out, indent=1))
         return out
-    out = apply_rule({name: load_scores(name, args.cached) for name in args.set}, args.floor)
+    sets = {name: load_scores(name, args.cached) for name in args.set}
+    out = apply_rule(sets, args.floor, args.few_facets_floor)
     print(json.dumps(out, indent=1))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1) + "\n")

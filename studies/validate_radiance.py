@@ -74,6 +74,7 @@ SETS = {
     "validation_holdout20": "validation_holdout20",
     "validation_holdout21": "validation_holdout21",
     "validation_holdout22": "validation_holdout22",
+    "validation_holdout23": "validation_holdout23",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -84,6 +85,7 @@ SETS = {
     "mitsuba_holdout7": "validation_mitsuba_holdout7",
     "mitsuba_holdout8": "validation_mitsuba_holdout8",
     "mitsuba_holdout9": "validation_mitsuba_holdout9",
+    "mitsuba_holdout10": "validation_mitsuba_holdout10",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -187,6 +189,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout7": ("baseline", "perez"),  # and radiance-ward, merged
     "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "mitsuba_holdout9": ("baseline", "perez"),  # the default after stop 55, measured
+    "mitsuba_holdout10": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -206,6 +209,7 @@ DEFAULT_METHODS = {
     "validation_holdout20": ("baseline", "perez"),  # the default after holdout 21, measured
     "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
     "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged (stop 58)
+    "validation_holdout23": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
 }
 
 

@@ -537,6 +537,27 @@ def test_floor_rule_widens_the_default_again_and_applies_its_conditions():
     assert not fr.apply_rule({"mitsuba_holdout9": two_far}, 0.03)["decision"]["met"]
 
 
+def test_floor_rule_keeps_the_few_facets_floor_where_few_facets_measured():
+    # stop 59's candidate: an object whose gamma at most 3 facets measured
+    # keeps the floor 0.06 (its facets' disagreement cannot show the
+    # model's error), one that 4 or more measured gets --floor; the
+    # widths follow 2 x 1.645 x hypot(floor, 0.01) within the draws' 0.01
+    fr = study_module("floor_rule")
+    assert fr.FEW_FACETS == 3 and fr.FEW_FACETS_FLOOR == 0.06
+    few, many = _floor_score("ms00", 0.5, 0.5), _floor_score("ms01", 0.5, 0.5)
+    few["perez"]["model_error"] = {"facets": 3}
+    many["perez"]["model_error"] = {"facets": 4}
+    rng = np.random.default_rng(0)
+    for score, floor in ((few, 0.06), (many, 0.03)):
+        q = fr.with_floor(score["perez"], 0.03, rng, few_facets_floor=0.06)
+        assert abs(np.ptp(q["hdi90"]) - 2 * 1.645 * np.hypot(floor, 0.01)) < 0.01, floor
+    # and without the option every object gets --floor, as stop 56's rule
+    q = fr.with_floor(few["perez"], 0.03, rng)
+    assert abs(np.ptp(q["hdi90"]) - 2 * 1.645 * np.hypot(0.03, 0.01)) < 0.01
+    out = fr.apply_rule({"mitsuba_holdout10": [few, many]}, 0.03, few_facets_floor=0.06)
+    assert out["few_facets_floor"] == 0.06 and out["few_facets"] == 3
+
+
 def test_floor_rule_chose_0_03_on_the_seen_sets():
     # stop 56's choice, on the committed scores of holdouts 17-19 and
     # Mitsuba holdouts 7-8 (96 sun-lit): floors 0.02-0.04 put both
