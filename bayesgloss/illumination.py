@@ -236,6 +236,11 @@ def _even_mix(sources: int) -> np.ndarray:
     return np.array([1.0] + [1.0 / (sources - 1)] * (sources - 1))
 
 
+#: Fewest facets (points) a worker of :func:`illumination_bases` is given:
+#: below about this many a worker's start costs more than its share saves.
+MIN_FACETS_A_BLOCK = 8
+
+
 def illumination_bases(
     geometry,
     day,
@@ -270,8 +275,10 @@ def illumination_bases(
     jobs : int
         Worker processes (:func:`bayesgloss.pool.process_pool`): the facets
         are split into that many blocks, each block's bases of every source
-        found in a worker of its own. The bases are the same whatever
-        ``jobs`` (each facet's quadrature is its own).
+        found in a worker of its own (blocks of at least
+        :data:`MIN_FACETS_A_BLOCK`). The bases are the same whatever ``jobs``
+        (each facet's quadrature is its own), but for the last bits of a
+        matrix product (the workers' BLAS runs on one thread).
     **kwargs
         For :func:`bayesgloss.render.facet_bases` (``ground``,
         ``ground_reflectance``, ``lobe``...). ``occlusion`` (a
@@ -289,7 +296,8 @@ def illumination_bases(
             f"{fr.IN_LOBE[fresnel]!r} lobe, not the {lobe_family!r} lobe"
         )
     args = (day, exponents, tuple(others), lobe_family, fresnel in fr.IN_LOBE)
-    blocks = np.array_split(np.arange(len(geometry)), max(1, min(jobs, len(geometry) // 8)))
+    n_blocks = max(1, min(jobs, len(geometry) // MIN_FACETS_A_BLOCK))
+    blocks = np.array_split(np.arange(len(geometry)), n_blocks)
     if len(blocks) == 1:
         d_parts, g_parts, r_parts = _source_bases(geometry, *args, kwargs)
     else:  # each block of facets in a worker of its own, joined along the facets
