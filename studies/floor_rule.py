@@ -231,7 +231,7 @@ FACET_FLOORS = ((0.06, 0.06), (0.0, 0.0), (0.03, 0.03), (0.06, 0.02), (0.06, 0.0
 
 
 def by_facet_count(sets: dict[str, list[dict]] | None = None) -> dict:
-    """Coverage and median width of the sun-lit reported intervals, per
+    """:func:`figures` of the sun-lit reported intervals, per
     renderer and per group (at most :data:`FEW_FACETS` measuring facets, or
     more), for each pair of floors of :data:`FACET_FLOORS`, on the seen
     sets of :data:`SEEN_STOP59` (stop 59's lead, ``--by-facets``)."""
@@ -249,16 +249,8 @@ def by_facet_count(sets: dict[str, list[dict]] | None = None) -> dict:
                 entry = with_floor(s["perez"], floor, rng, few_floor)
                 group = "few" if measuring_facets(s["perez"]) <= FEW_FACETS else "more"
                 for key in (f"{renderer(name)}:{group}", renderer(name)):
-                    cells.setdefault(key, []).append((entry, s["truth"]))
-        table[f"{few_floor}/{floor}"] = {
-            key: {
-                "held": int(sum(bool(holds(e, t)) for e, t in rows)),
-                "n": len(rows),
-                "median_width": float(np.median([np.ptp(reported_interval(e)) for e, _ in rows])),
-                "mae": float(np.mean([abs(e["median"] - t) for e, t in rows])),
-            }
-            for key, rows in sorted(cells.items())
-        }
+                    cells.setdefault(key, []).append((entry, s["truth"], s["direct_sun"]))
+        table[f"{few_floor}/{floor}"] = {key: figures(rows) for key, rows in sorted(cells.items())}
     return {"sets": {k: len(v) for k, v in sets.items()}, "few_facets": FEW_FACETS, "table": table}
 
 

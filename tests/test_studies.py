@@ -558,6 +558,22 @@ def test_floor_rule_keeps_the_few_facets_floor_where_few_facets_measured():
     assert out["few_facets_floor"] == 0.06 and out["few_facets"] == 3
 
 
+def test_floor_rule_tabulates_the_floors_by_facet_count():
+    # --by-facets: a truth 0.07 from an N(0.5, 0.01) posterior is held at
+    # floor 0.06 (+-0.10) and missed at 0.03 (+-0.05): under the pair
+    # 0.06 / 0.03 the 3-facet object holds it and the 4-facet one misses,
+    # under 0.06 / 0.06 both hold it; each group and the renderer counted
+    fr = study_module("floor_rule")
+    few, more = _floor_score("ms00", 0.57, 0.5), _floor_score("ms01", 0.57, 0.5)
+    few["perez"]["model_error"] = {"facets": 3}
+    more["perez"]["model_error"] = {"facets": 4}
+    table = fr.by_facet_count({"mitsuba_holdout10": [few, more]})["table"]
+    split, same = table["0.06/0.03"], table["0.06/0.06"]
+    assert (split["mitsuba:few"]["held"], split["mitsuba:more"]["held"]) == (1, 0)
+    assert (split["mitsuba"]["held"], split["mitsuba"]["sun_lit"]) == (1, 2)
+    assert same["mitsuba"]["held"] == 2
+
+
 def test_floor_rule_chose_0_03_on_the_seen_sets():
     # stop 56's choice, on the committed scores of holdouts 17-19 and
     # Mitsuba holdouts 7-8 (96 sun-lit): floors 0.02-0.04 put both
