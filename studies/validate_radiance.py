@@ -75,6 +75,7 @@ SETS = {
     "validation_holdout21": "validation_holdout21",
     "validation_holdout22": "validation_holdout22",
     "validation_holdout23": "validation_holdout23",
+    "validation_holdout24": "validation_holdout24",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -86,6 +87,7 @@ SETS = {
     "mitsuba_holdout8": "validation_mitsuba_holdout8",
     "mitsuba_holdout9": "validation_mitsuba_holdout9",
     "mitsuba_holdout10": "validation_mitsuba_holdout10",
+    "mitsuba_holdout11": "validation_mitsuba_holdout11",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -96,6 +98,7 @@ METHODS = (
     "loo-equal", "fresnel", "schlick", "lobes", "shadow", "materials", "clipped", "perez",
     "lobe-floor", "cie-families", "equal-near", "day-exposure", "ground-shadow",
     "radiance-ward", "within-10", "in-lobe", "cie-overcast", "sun-side-overcast",
+    "lobes-every-sky",
 )  # fmt: skip
 #: Methods scored on another commit (a worktree of it, as ``perez``) and
 #: copied into this set's scores under their own name (:func:`merge_scores`):
@@ -129,6 +132,9 @@ SCORED_ELSEWHERE = {
     # holdout 22's candidate (studies/patches/sun-side-overcast.patch): CIE
     # types 2 and 4 in the first sky stack (sky_families.FIRST_STACK_OVERCAST)
     "sun-side-overcast": "perez",
+    # holdout 24's and Mitsuba holdout 11's candidate, branch lobes-every-sky: where
+    # the sky families tie, every lobe fitted under each tied sky (stacking.fit_stacked)
+    "lobes-every-sky": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -190,6 +196,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout8": ("baseline", "perez"),  # and within-10, in-lobe, merged
     "mitsuba_holdout9": ("baseline", "perez"),  # the default after stop 55, measured
     "mitsuba_holdout10": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
+    "mitsuba_holdout11": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -210,6 +217,7 @@ DEFAULT_METHODS = {
     "validation_holdout21": ("baseline", "perez"),  # sunless days; and cie-overcast, merged
     "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged (stop 58)
     "validation_holdout23": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
+    "validation_holdout24": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
 }
 
 
@@ -461,10 +469,16 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
 #: ``within-10`` changes only the weights that ``equal_when_unreliable``
 #: gives where its guard acts (flagged ``sky-family-not-identifiable``);
 #: ``in-lobe`` only the ``ggx-schlick`` fit of the lobe stack, which runs
-#: where the lobe families were stacked (a ``ggx-schlick`` entry).
+#: where the lobe families were stacked (a ``ggx-schlick`` entry);
+#: ``lobes-every-sky`` only where the sky families tied and the lobes were
+#: therefore not stacked (flagged both ``sky-family-not-identifiable`` and
+#: ``lobe-family-not-stacked``).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
     "in-lobe": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
+    "lobes-every-sky": lambda entry: (
+        {"sky-family-not-identifiable", "lobe-family-not-stacked"} <= set(entry.get("flags", []))
+    ),
 }
 
 
