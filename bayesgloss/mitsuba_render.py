@@ -947,8 +947,33 @@ def render_frames(
             scene = mi.load_dict(
                 _scene_dict(config, facets, material, folder, (radiance, sky_h[t]), sun, spp)
             )
-            out[i] = np.asarray(mi.render(scene, spp=int(spp), seed=int(seed + t)), np.float32)
+            out[i] = finite_render(
+                lambda s, scene=scene: mi.render(scene, spp=int(spp), seed=s), int(seed + t)
+            )
     return out
+
+
+#: Offset between the seeds of a frame's renders where one held a NaN sample.
+RETRY_SEED_STEP = 1_000_003
+#: Renders of a frame before a NaN sample is an error.
+RENDER_TRIES = 3
+
+
+def finite_render(render, seed: int, tries: int = RENDER_TRIES) -> np.ndarray:
+    """``render(seed)`` as float32, rendered again with another seed
+    (``seed + k`` :data:`RETRY_SEED_STEP`) where it holds a non-finite value.
+
+    Mitsuba's sampler now and then returns a NaN sample (it warns "Invalid
+    sample value"; seen on a perfectly smooth silver box of Mitsuba holdout
+    11, one sample in about 10^8), which a bundle cannot hold. A frame
+    whose render is finite keeps its seed, so sets rendered before are
+    rendered the same. Raises ValueError after ``tries`` renders with one.
+    """
+    for k in range(tries):
+        image = np.asarray(render(int(seed + k * RETRY_SEED_STEP)), np.float32)
+        if np.all(np.isfinite(image)):
+            return image
+    raise ValueError(f"Mitsuba returned non-finite values in {tries} renders from seed {seed}")
 
 
 # -- sequences and bundles ------------------------------------------------------

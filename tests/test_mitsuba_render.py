@@ -274,3 +274,27 @@ def test_a_blended_smooth_metal_renders_its_true_gloss():
     eta, k = np.array(metal["eta"]), np.array(metal["k"])
     closed = 0.1 * ((eta - 1) ** 2 + k**2) / ((eta + 1) ** 2 + k**2)
     np.testing.assert_allclose(mr.model_albedos(blend)[0], closed, atol=1e-5)
+
+
+def test_a_render_with_a_nan_sample_is_rendered_again_with_another_seed():
+    # Mitsuba holdout 11's smooth silver box: one frame's render held a NaN
+    # sample. The frame is rendered again with the next seed; a finite
+    # render keeps its own seed (sets rendered before stay the same); a
+    # renderer that keeps failing is an error, not a bundle of NaN
+    seeds = []
+
+    def flaky(seed, bad=1):
+        seeds.append(seed)
+        image = np.ones((2, 2, 3))
+        if len(seeds) <= bad:
+            image[0, 1, 2] = np.nan
+        return image
+
+    image = mr.finite_render(flaky, 7)
+    assert seeds == [7, 7 + mr.RETRY_SEED_STEP] and image.dtype == np.float32
+    assert np.all(image == 1.0)
+    seeds.clear()
+    assert np.all(mr.finite_render(lambda s: flaky(s, bad=0), 7) == 1.0) and seeds == [7]
+    seeds.clear()
+    with pytest.raises(ValueError, match="non-finite values in 3 renders from seed 7"):
+        mr.finite_render(lambda s: flaky(s, bad=5), 7)
