@@ -26,6 +26,7 @@ from .lobes import check_lobe_family, roughness_of_exponent
 from .object_shadow import (
     DEFAULT_GROUND_SHADOW,
     averaged_bases,
+    bounds_a_volume,
     check_ground_shadow,
     shadow_points,
 )
@@ -147,7 +148,8 @@ def joint_inputs(
             occlusion = occlusion.replace(occluder_reflectance=float(occluder_albedo))
         mesh["occlusion"] = occlusion
     owner = None
-    if check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane":
+    convex = check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane"
+    if convex and bounds_a_volume(b.facets):
         # points over the kept facets only; the object is bounded by all of them
         geometry, owner = shadow_points(b.facets, b.camera_position, which=which)
     bases = il.illumination_bases(
