@@ -413,19 +413,8 @@ def estimate_bundle(
         }
     else:
         idata, samples = facets_fit(
-            b,
-            curves,
-            y,
-            usable,
-            censored,
-            keep,
-            illumination,
-            noise,
-            camera,
-            seed,
-            jobs,
-            progress,
-            sampler_options,
+            *(b, curves, y, usable, censored, keep, illumination, noise, camera, seed),
+            *(jobs, progress, sampler_options),
         )
         used = None
         run = {
