@@ -599,3 +599,17 @@ def test_floor_rule_reads_mitsuba_holdout9_as_stop_56_decided():
     assert (d["confident_misses"], c["confident_misses"]) == (2, 4)
     assert not out["decision"]["(1) per renderer in 85-97 % or no farther from 90 %"]["mitsuba"]
     assert not out["decision"]["met"]
+
+
+def test_bench_tied_skies_times_only_objects_of_few_facets(tmp_path):
+    # condition (e) of holdout 24's rule is about the objects whose sky
+    # families tie: the benchmark picks bundles of 1-3 seen facets, in name
+    # order, as many as asked, and nothing else
+    bench = study_module("bench_tied_skies")
+    for name, facets in (("a-box", 2), ("b-dome", 30), ("c-box", 3), ("d-wall", 1)):
+        (tmp_path / name).mkdir()
+        text = json.dumps({"facets": [{"id": i} for i in range(facets)]})
+        (tmp_path / name / "sequence.json").write_text(text)
+    chosen = bench.boxes(str(tmp_path / "*"), 6)
+    assert [p.name for p in chosen] == ["a-box", "c-box", "d-wall"]
+    assert [p.name for p in bench.boxes(str(tmp_path / "*"), 2)] == ["a-box", "c-box"]
