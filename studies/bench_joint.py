@@ -128,11 +128,12 @@ def checkout(rev: str) -> Path:
     return path
 
 
-def timed_in(tree: Path, args: dict) -> dict:
-    """One estimate (:data:`CHILD`) with the bayesgloss of ``tree``."""
+def timed_in(tree: Path, args: dict, child: str | None = None) -> dict:
+    """One estimate (``child``'s code, default :data:`CHILD`, given ``args``
+    as JSON) with the bayesgloss of ``tree``: the JSON its last line prints."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, json.dumps(args)],
+        [sys.executable, "-c", child or CHILD, json.dumps(args)],
         env=env,
         cwd=tree,  # not the caller's folder: python -c puts it first on sys.path
         capture_output=True,

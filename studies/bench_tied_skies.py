@@ -28,8 +28,6 @@ from __future__ import annotations
 import argparse
 import glob
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -40,7 +38,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
-from bench_joint import checkout  # noqa: E402
+from bench_joint import checkout, timed_in  # noqa: E402
 
 #: The default's estimate of one bundle, in a fresh process: what
 #: ``validate_radiance.py`` runs as ``perez`` (estimate's defaults).
@@ -70,19 +68,9 @@ def boxes(pattern: str, count: int) -> list[Path]:
 def timed(tree: Path, path: Path, max_sweeps: int) -> dict:
     """One default estimate of ``path`` with the bayesgloss of ``tree``:
     wall-clock seconds of the whole process, its answer and flags."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    args = json.dumps({"path": str(path), "max_sweeps": max_sweeps})
     t0 = time.perf_counter()
-    out = subprocess.run(
-        [sys.executable, "-c", CHILD, args],
-        env=env,
-        cwd=tree,  # not the caller's folder: python -c puts it first on sys.path
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    seconds = time.perf_counter() - t0
-    return {"seconds": seconds, **json.loads(out.stdout.strip().splitlines()[-1])}
+    answer = timed_in(tree, {"path": str(path), "max_sweeps": max_sweeps}, child=CHILD)
+    return {"seconds": time.perf_counter() - t0, **answer}
 
 
 def run(against: str, candidate: str, bundles: list[Path], max_sweeps: int) -> dict:
