@@ -82,12 +82,13 @@ from .joint_estimate import (
     bundle_sky,
     check_clipped,
     frame_summary,
+    ground_of,
     joint_fit,
     object_convergence,
     sky_model_summary,
 )
 from .model_error import model_error_sd, with_model_error
-from .object_shadow import bounds_a_volume, check_ground_shadow, default_ground_shadow
+from .object_shadow import check_ground_shadow, convex_shadow_state, default_ground_shadow
 from .occluder_albedo import (
     DEFAULT_OCCLUDER_ALBEDO,
     check_occluder_albedo_mode,
@@ -341,7 +342,7 @@ def estimate_bundle(
     shadow = check_ground_shadow(ground_shadow or default_ground_shadow(joint))
     if shadow != "none" and not joint:
         raise ValueError(f"ground shadow '{shadow}' needs per-frame illumination")
-    no_shadow = shadow == "convex" and not b.has_mesh and not bounds_a_volume(b.facets)
+    shadow_state = convex_shadow_state(b.facets, shadow, b.has_mesh, ground_of(illumination))
     clipped = check_clipped(clipped or DEFAULT_CLIPPED)
     if joint:
         sampler_options["fresnel"] = fresnel
@@ -427,7 +428,7 @@ def estimate_bundle(
     out = _summarise(
         b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing
     )
-    if no_shadow:  # one wall seen, or parallel walls only (object_shadow.bounds_a_volume)
+    if shadow_state == "not-built":  # one wall seen, or parallel walls only
         out.summary["object"]["flags"].append("ground-shadow-not-built")
     if families is not None:
         out.summary["sky_families"] = families

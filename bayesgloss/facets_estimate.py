@@ -16,7 +16,7 @@ import numpy as np
 from . import likelihood as lk
 from . import render, sampling
 from ._thirdparty import arviz
-from .joint_estimate import bundle_sky
+from .joint_estimate import bundle_sky, ground_of
 from .pool import process_pool
 from .sky import sky_models
 from .visibility import bundle_occlusion
@@ -44,7 +44,7 @@ def bundle_bases(
         )
     rho = b.ground_albedo
     day = bundle_sky(b, illumination, rho)
-    ground = "sky" if illumination == "point-sun" else "plane"
+    ground = ground_of(illumination)
     return render.facet_bases(
         b.view_geometry(occluder),
         day,

@@ -26,8 +26,8 @@ from .lobes import check_lobe_family, roughness_of_exponent
 from .object_shadow import (
     DEFAULT_GROUND_SHADOW,
     averaged_bases,
-    bounds_a_volume,
     check_ground_shadow,
+    convex_shadow_state,
     shadow_points,
 )
 from .pool import process_pool
@@ -40,6 +40,7 @@ __all__ = [
     "JOINT_MAX_SWEEPS",
     "FACETS_GIVEN_FRAMES_STEPS",
     "bundle_sky",
+    "ground_of",
     "joint_inputs",
     "joint_fit",
     "add_facet_posteriors",
@@ -100,6 +101,13 @@ def bundle_sky(b, illumination: str, ground_reflectance: float):
     return sky.daylight(illumination, b.sun_direction, **options)
 
 
+def ground_of(illumination: str) -> str:
+    """The ground the bases of ``illumination`` see: ``"sky"`` for the bare
+    point sun (nothing but the sun), else ``"plane"`` (the bundle's ground
+    at its reflectance; :func:`bayesgloss.render.facet_bases`)."""
+    return "sky" if illumination == "point-sun" else "plane"
+
+
 def joint_inputs(
     b,
     y,
@@ -134,7 +142,7 @@ def joint_inputs(
     rho = b.ground_albedo
     names = AUTO_SKIES if illumination == "auto" else (illumination,)
     day, *others = (bundle_sky(b, name, rho) for name in names)
-    ground = "sky" if illumination == "point-sun" else "plane"
+    ground = ground_of(illumination)
     measured = usable[keep] & ~censored[keep]
     used = measured.any(axis=0) & b.sun_up  # frames with a measured entry
     ok, clip = measured, None
@@ -148,8 +156,8 @@ def joint_inputs(
             occlusion = occlusion.replace(occluder_reflectance=float(occluder_albedo))
         mesh["occlusion"] = occlusion
     owner = None
-    convex = check_ground_shadow(ground_shadow) == "convex" and not mesh and ground == "plane"
-    if convex and bounds_a_volume(b.facets):
+    mode = check_ground_shadow(ground_shadow)
+    if convex_shadow_state(b.facets, mode, bool(mesh), ground) == "built":
         # points over the kept facets only; the object is bounded by all of them
         geometry, owner = shadow_points(b.facets, b.camera_position, which=which)
     bases = il.illumination_bases(

@@ -35,6 +35,7 @@ __all__ = [
     "DEFAULT_GROUND_SHADOW",
     "default_ground_shadow",
     "bounds_a_volume",
+    "convex_shadow_state",
     "shadow_points",
     "facet_mean",
     "averaged_bases",
@@ -84,6 +85,22 @@ def bounds_a_volume(facets) -> bool:
     except ValueError:
         return False
     return True
+
+
+def convex_shadow_state(facets, mode: str, has_mesh: bool, ground: str) -> str:
+    """Whether the object's shadow on the ground is modelled from its facets.
+
+    ``"built"`` where ``mode`` is ``"convex"``, the bundle has no
+    ``object_mesh`` (its own occlusion map then hides the ground), the
+    illumination has a ground plane (``ground="plane"``; a point sun has
+    none) and the facets bound a volume (:func:`bounds_a_volume`);
+    ``"not-built"`` where all hold but the last (the estimate is flagged
+    ``ground-shadow-not-built``); ``"not-modelled"`` otherwise. The one
+    decision both the joint model's data and the estimate's flags read.
+    """
+    if mode != "convex" or has_mesh or ground != "plane":
+        return "not-modelled"
+    return "built" if bounds_a_volume(facets) else "not-built"
 
 
 def shadow_points(facets, camera_position, per_side: int = POINTS_PER_SIDE, which=None):

@@ -227,6 +227,26 @@ def test_one_wall_seen_bounds_no_object_and_the_estimate_goes_on(tmp_path):
     np.testing.assert_array_equal(convex.glossy, plain.glossy)
 
 
+def test_the_shadow_is_built_flagged_or_not_modelled_by_one_decision():
+    # estimate's flag and joint_inputs' bases read the same decision: the
+    # bare point sun has no ground plane, so a lone wall under it is not
+    # flagged (before stop 61 estimate flagged it, joint_inputs built nothing)
+    from bayesgloss.joint_estimate import ground_of
+    from bayesgloss.object_shadow import convex_shadow_state
+
+    box = geometry.box(size=(0.8, 1.2, 1.0), azimuth=20.0)
+    seen = _seen(box, CAMERA)
+    walls = np.flatnonzero(np.abs(seen.normal[:, 2]) < 0.5)
+    one = seen.subset(walls[:1])
+    plane, bare = ground_of("gensky-clear"), ground_of("point-sun")
+    assert (plane, bare) == ("plane", "sky")
+    assert convex_shadow_state(seen, "convex", False, plane) == "built"
+    assert convex_shadow_state(one, "convex", False, plane) == "not-built"
+    assert convex_shadow_state(one, "convex", False, bare) == "not-modelled"
+    assert convex_shadow_state(seen, "convex", True, plane) == "not-modelled"
+    assert convex_shadow_state(one, "none", False, plane) == "not-modelled"
+
+
 def test_an_estimate_of_one_wall_is_flagged_not_crashed(tmp_path):
     # the synthetic bundle's first facet turned upright: one vertical wall
     # alone, its frames kept. The default ground shadow cannot be built; the
