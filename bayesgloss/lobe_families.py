@@ -25,6 +25,12 @@ The sky is chosen first (:func:`bayesgloss.stacking.fit_stacked`): with
 lobe and the other lobes are fitted under the most-weighted sky family, so
 the families cost two fits more than the sky alone (not three times as
 many); with a named sky (or ``"auto"``) every lobe is fitted under it.
+Where the sky families tie (``sky-family-not-identifiable``, most objects
+of 1-3 facets), every lobe is fitted under each sky family sharing the
+weight and the answer mixes them with weight w_sky w_lobe|sky (since stop
+61, by the rule of holdout 24 and Mitsuba holdout 11: on their 26 sun-lit
+boxes the reported interval held the truth in 22 against Phong alone's 19,
+confident misses 3 against 7, MAE 0.130 against 0.146).
 
 ``estimate --lobe materials`` (:data:`MATERIAL_FAMILIES`) stacks one fit
 more: GGX with Schlick's Fresnel (:mod:`bayesgloss.fresnel`), a dielectric

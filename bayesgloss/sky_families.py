@@ -611,6 +611,7 @@ def fit_families(
     overcast_variants=False,
     unreliable_loo="equal",
     perez_families=DEFAULT_PEREZ_FAMILIES,
+    keep_fits=False,
 ):
     """:func:`~bayesgloss.joint_estimate.joint_fit` under each of :data:`FAMILIES`,
     stacked (module docstring).
@@ -633,7 +634,9 @@ def fit_families(
     (:func:`far_behind`, :func:`_fit_screened`; ``options["screen_families"]
     = False`` runs all in full). ``perez_families``: also fit
     :data:`PEREZ_FAMILIES` (default :data:`DEFAULT_PEREZ_FAMILIES`),
-    screened and stacked with the others.
+    screened and stacked with the others. ``keep_fits``: the record also
+    holds every family's fit (``fits``: name to (idata, samples, used)) and
+    its own posterior before the mixture (``posteriors``), not for JSON.
 
     Returns
     -------
@@ -695,6 +698,10 @@ def fit_families(
         for name in names
     }
     own = [fits[n][0].posterior for n in names]
+    if keep_fits:  # the most-weighted family's own posterior, before the mixture replaces it
+        unmixed = {
+            n: p.copy(deep=True) if n == best else p for n, p in zip(names, own, strict=True)
+        }
     mix_posteriors(idata, own, ("gamma_object", "n_object"), weights, np.random.default_rng(seed))
     idata.posterior.attrs["sky_family_weights"] = json.dumps(
         {name: float(w) for name, w in zip(names, weights, strict=True)}
@@ -711,4 +718,6 @@ def fit_families(
         "equal_weights": equal,
         "seconds": seconds,
     }
+    if keep_fits:
+        info |= {"fits": fits, "posteriors": unmixed}
     return idata, samples, used, info

@@ -31,12 +31,29 @@ component of the mixture keeps the sky mixture's draws.
 
 Where the sky families were given equal weights because their PSIS-LOO is
 unreliable (:func:`bayesgloss.sky_families.equal_when_unreliable`: the
-day's sky is not identified), the other choices are not fitted: fitted
-under one sky, a winning choice's posterior would drop the sky's
-uncertainty the equal mixture carries (stop 35: a box's answer narrowed to
-one sky's fit while flagged ``sky-family-not-identifiable``). The answer is
-then the default choice's sky mixture, and the record says the part was
-not stacked.
+day's sky is not identified, as on most objects of 1-3 facets), a choice
+fitted under one sky would drop the sky's uncertainty the equal mixture
+carries (stop 35: a box's answer narrowed to one sky's fit while flagged
+``sky-family-not-identifiable``). Two ways out (``unidentified_sky``):
+
+- ``"default-alone"`` (the default until stop 61): the other choices are not fitted;
+  the answer is the default choice's sky mixture, and the record says the
+  part was not stacked. The part's uncertainty is then dropped instead:
+  every box was answered by the Phong lobe alone, and on Mitsuba's boxes
+  (GGX lobes, Fresnel) 5 of 14 sun-lit intervals of the seen holdouts 7-9
+  missed, rough plastics read 0.30-0.76 for 0.07-0.18.
+- ``"every-near-sky"`` (:func:`_stacked_under_near_skies`): every choice is
+  fitted under each sky family that shares the weight, the choices are
+  weighed within each sky as elsewhere (with the same guard: where their
+  PSIS-LOO is unreliable too, those within
+  :data:`~bayesgloss.sky_families.UNRELIABLE_NEAR_NATS` of the best share
+  the weight evenly), and the answer is the mixture over (sky, choice)
+  with weight w_sky w_choice|sky: the sky's uncertainty and the part's
+  both carried. It costs (choices - 1) fits per near sky, cheap on the few
+  facets where it acts. The default since stop 61, by a rule written
+  before its sets were drawn (holdout 24 and Mitsuba holdout 11, 32 boxes:
+  interval held 22 of 26 sun-lit against 19, confident misses 3 against
+  7; ``studies/README.md``).
 """
 
 from __future__ import annotations
@@ -53,7 +70,14 @@ from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import add_facet_posteriors, joint_fit
 from .pool import process_pool, shares
 
-__all__ = ["TIED_ELPD", "StackedFits", "fit_stacked", "spread_tied_weights"]
+__all__ = [
+    "TIED_ELPD",
+    "UNIDENTIFIED_SKY",
+    "DEFAULT_UNIDENTIFIED_SKY",
+    "StackedFits",
+    "fit_stacked",
+    "spread_tied_weights",
+]
 
 #: Posterior variables of the object that the stacked mixture replaces.
 MIXED = ("gamma_object", "n_object", "roughness_object")
@@ -63,6 +87,10 @@ MIXED = ("gamma_object", "n_object", "roughness_object")
 TIED_ELPD = 4.0
 #: How :func:`fit_stacked` weighs fits tied with the best.
 TIES = ("stacking", "spread")
+#: What :func:`fit_stacked` fits where the sky is not identified (module docstring).
+UNIDENTIFIED_SKY = ("default-alone", "every-near-sky")
+#: :func:`fit_stacked`'s ``unidentified_sky`` by default (since stop 61).
+DEFAULT_UNIDENTIFIED_SKY = "every-near-sky"
 
 
 def spread_tied_weights(scores: dict, tied_elpd: float = TIED_ELPD) -> dict:
@@ -161,26 +189,30 @@ class StackedFits:
 
 def _fit_each(args, illumination, seed, options, choices, progress, jobs):
     """joint_fit of each choice (label to options) under one sky: {label: fit}."""
+    tasks = {label: (illumination, opts) for label, opts in choices.items()}
+    return _fit_tasks(args, seed, tasks, progress, jobs)
+
+
+def _fit_tasks(args, seed, tasks, progress, jobs):
+    """joint_fit of each task (key to (sky, options)), ``jobs`` at once: {key: fit}."""
     fits = {}
-    outer, inner = shares(jobs, len(choices))
+    outer, inner = shares(jobs, len(tasks))
     if outer > 1:
         with process_pool(outer) as pool:
             futures = {
-                pool.submit(
-                    joint_fit, *args, illumination, seed, opts, facets=False, jobs=inner
-                ): label
-                for label, opts in choices.items()
+                pool.submit(joint_fit, *args, sky, seed, opts, facets=False, jobs=inner): key
+                for key, (sky, opts) in tasks.items()
             }
             for done, future in enumerate(as_completed(futures), 1):
                 fits[futures[future]] = future.result()
                 if progress is not None:
-                    progress(done, len(choices))
+                    progress(done, len(tasks))
     else:
-        for label, opts in choices.items():
-            fits[label] = joint_fit(*args, illumination, seed, opts, facets=False, jobs=inner)
+        for key, (sky, opts) in tasks.items():
+            fits[key] = joint_fit(*args, sky, seed, opts, facets=False, jobs=inner)
             if progress is not None:
-                progress(len(fits), len(choices))
-    return fits
+                progress(len(fits), len(tasks))
+    return {key: fits[key] for key in tasks}  # in the tasks' order
 
 
 def fit_stacked(
@@ -205,6 +237,7 @@ def fit_stacked(
     perez_families=sky_families.DEFAULT_PEREZ_FAMILIES,
     ties="stacking",
     sunless_default=False,
+    unidentified_sky=DEFAULT_UNIDENTIFIED_SKY,
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
 
@@ -246,9 +279,17 @@ def fit_stacked(
         lobe's shape: the lobe stack read 0.94 [0.79, 1.00] for a true 0.10
         (Mitsuba holdout 1, ms16) and 0.054 [0, 0.15] for a true 0 where
         Phong alone read 0.012 (holdout 8, vs18; ``studies/README.md``).
+    unidentified_sky : {"every-near-sky", "default-alone"}
+        Where the sky families got equal weights (the sky not identified):
+        every choice fitted under each sky family sharing the weight, or
+        the default choice alone (module docstring).
     """
     if ties not in TIES:
         raise ValueError(f"unknown ties {ties!r}; valid: {', '.join(TIES)}")
+    if unidentified_sky not in UNIDENTIFIED_SKY:
+        raise ValueError(
+            f"unknown unidentified_sky {unidentified_sky!r}; valid: {', '.join(UNIDENTIFIED_SKY)}"
+        )
     args = (b, curves, y, usable, censored, keep)
     keys = (option,) if isinstance(option, str) else tuple(option)
     options = {k: v for k, v in options.items() if k not in keys}
@@ -269,11 +310,19 @@ def fit_stacked(
             overcast_variants=overcast_variants,
             unreliable_loo=unreliable_loo,
             perez_families=perez_families,
+            keep_fits=True,
         )
         sky_info = first[3]
+        sky_fits, unmixed = sky_info.pop("fits"), sky_info.pop("posteriors")
         seconds += sky_info.pop("seconds")
         others = {label: opts(label) for label in labels if label != default}
         sunless = sunless_default and sky_info["most_weight"] in sky_families.OVERCAST_GROUP
+        every = unidentified_sky == "every-near-sky" and len(labels) > 1
+        if sky_info.get("equal_weights") and every and not sunless:
+            return _stacked_under_near_skies(
+                args, seed, first, sky_fits, unmixed, labels, default, opts, ties, attribute,
+                progress, jobs, seconds,
+            )  # fmt: skip
         if sky_info.get("equal_weights") or sunless:  # the default alone
             labels, others = [default], {}
         fits = {default: first[:3]}
@@ -310,3 +359,96 @@ def fit_stacked(
     idata.posterior.attrs[f"{attribute}_most_weight"] = best
     idata.posterior.attrs[f"{attribute}_stacked"] = int(len(labels) > 1)
     return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds)
+
+
+def _weights_within(idatas: dict, ties: str) -> dict:
+    """Stacking weights of the choices' fits under one sky, with the sky
+    stack's guard where their PSIS-LOO is unreliable
+    (:func:`bayesgloss.sky_families.equal_when_unreliable`) and, where it
+    is not, ``ties`` as in :func:`fit_stacked`."""
+    scores = sky_families.loo_stacking_weights(idatas)
+    guarded = sky_families.equal_when_unreliable(scores)
+    if guarded is scores and ties == "spread":
+        guarded = spread_tied_weights(scores)
+    return guarded
+
+
+def _stacked_under_near_skies(
+    args, seed, first, sky_fits, unmixed, labels, default, opts, ties, attribute, progress,
+    jobs, seconds,
+) -> StackedFits:  # fmt: skip
+    """:func:`fit_stacked` where the sky is not identified, with
+    ``unidentified_sky="every-near-sky"`` (module docstring): every choice
+    under each sky family that shares the weight, mixed with weight
+    w_sky w_choice|sky."""
+    sky_w = json.loads(first[0].posterior.attrs["sky_family_weights"])
+    near = [sky for sky, w in sky_w.items() if w > 0]
+    tasks = {
+        (label, sky): (sky, opts(label)) for sky in near for label in labels if label != default
+    }
+    fitted = _fit_tasks(args, seed, tasks, progress, jobs)
+    fits, post = {}, {}  # (label, sky) to the fit and to its own posterior
+    for sky in near:
+        fits[default, sky], post[default, sky] = sky_fits[sky], unmixed[sky]
+        for label in labels:
+            if label != default:
+                fits[label, sky] = fitted[label, sky]
+                post[label, sky] = fitted[label, sky][0].posterior
+    within = {sky: _weights_within({lb: fits[lb, sky][0] for lb in labels}, ties) for sky in near}
+    pairs = [(label, sky) for sky in near for label in labels]
+    joint = np.array([sky_w[sky] * within[sky][label]["weight"] for label, sky in pairs])
+    joint /= joint.sum()
+    marginal = {
+        lb: float(sum(w for (k, _), w in zip(pairs, joint, strict=True) if k == lb))
+        for lb in labels
+    }
+    best = max(labels, key=lambda lb: marginal[lb])
+    best_sky = max(near, key=lambda sky: sky_w[sky] * within[sky][best]["weight"])
+    rng = np.random.default_rng(seed)
+    own = {}  # each choice's own answer: its fits mixed over the near skies
+    for label in labels:
+        ws = np.array([sky_w[sky] * within[sky][label]["weight"] for sky in near])
+        ds = post[label, near[0]].copy(deep=True)
+        if ws.sum() > 0:
+            mixed = [v for v in MIXED if v in ds]
+            holder = _Posterior(ds)
+            sky_families.mix_posteriors(
+                holder, [post[label, sky] for sky in near], mixed, ws / ws.sum(), rng
+            )
+        own[label] = ds
+    if best == default:
+        idata, samples, used = first[:3]
+    else:
+        idata, samples, used = fits[best, best_sky]
+        if "gamma" not in idata.posterior:
+            add_facet_posteriors(idata, samples, seed, jobs)
+        for key in ("sky_family_weights", "sky_family_most_weight", "sky_family_equal_weights"):
+            idata.posterior.attrs[key] = first[0].posterior.attrs[key]
+    mixed = [v for v in MIXED if all(v in post[p] for p in pairs)]
+    sky_families.mix_posteriors(idata, [post[p] for p in pairs], mixed, joint, rng)
+    most = max(near, key=lambda sky: sky_w[sky])  # the sky whose PSIS-LOO entries are kept
+    scores = {
+        label: {
+            **within[most][label],
+            "weight": marginal[label],
+            "weight_by_sky": {
+                sky: float(sky_w[sky] * within[sky][label]["weight"]) for sky in near
+            },
+        }
+        for label in labels
+    }
+    idata.posterior.attrs[f"{attribute}_weights"] = json.dumps(marginal)
+    idata.posterior.attrs[f"{attribute}_most_weight"] = best
+    idata.posterior.attrs[f"{attribute}_stacked"] = 1
+    seconds += sum(fit[1].seconds for fit in fitted.values())
+    by_label = {label: fits[label, best_sky] for label in labels}
+    sky_info = first[3]
+    return StackedFits(idata, samples, used, by_label, own, scores, best, sky_info, seconds)
+
+
+@dataclass
+class _Posterior:
+    """A posterior dataset where :func:`bayesgloss.sky_families.mix_posteriors`
+    expects an InferenceData."""
+
+    posterior: object

@@ -67,7 +67,8 @@ def test_a_sky_not_identified_leaves_the_part_unstacked(monkeypatch):
         )
         samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
         info = {"most_weight": "gensky-clear", "equal_weights": equal, "seconds": 4.0}
-        return idata, samples, None, info
+        fits = {"gensky-clear": (idata, samples, None)}
+        return idata, samples, None, info | {"fits": fits, "posteriors": {}}
 
     monkeypatch.setattr(sky_families, "fit_families", fake_families)
     calls = _fake_fits(monkeypatch, {"ward": -1.0}, spread=0.05)
@@ -75,7 +76,7 @@ def test_a_sky_not_identified_leaves_the_part_unstacked(monkeypatch):
     kw = dict(option="lobe_family", default="phong", attribute="lobe_family")
     choices = {"phong": "phong", "ward": "ward", "ggx": "ggx"}
     equal = True
-    alone = stacking.fit_stacked(*args, choices=choices, **kw)
+    alone = stacking.fit_stacked(*args, choices=choices, unidentified_sky="default-alone", **kw)
     assert calls == [] and list(alone.own) == ["phong"]
     assert alone.record("k", {}, "b", alone.best)["stacked"] is False
     assert alone.idata.posterior.attrs["lobe_family_stacked"] == 0
@@ -85,6 +86,73 @@ def test_a_sky_not_identified_leaves_the_part_unstacked(monkeypatch):
     stacked = stacking.fit_stacked(*args, choices=choices, **kw)
     assert calls == ["ward", "ggx"] and stacked.best == "ward"
     assert stacked.record("k", {}, "b", stacked.best)["stacked"] is True
+    with pytest.raises(ValueError, match="unknown unidentified_sky"):
+        stacking.fit_stacked(*args, choices=choices, unidentified_sky="each", **kw)
+
+
+def test_a_sky_not_identified_stacks_every_lobe_under_each_tied_sky(monkeypatch):
+    # the default since stop 60's candidate (unidentified_sky="every-near-sky"):
+    # where the sky families share the weight (two tied, A and B; C ruled
+    # out), every other lobe is fitted under A and under B, not C; within
+    # each sky the lobes' PSIS-LOO is as unreliable (log densities with sd 5
+    # over the draws: Pareto k far above 0.7), so they share its weight; the
+    # answer mixes the six (sky, lobe) fits at 1/6 each: gammas 0.1-0.6,
+    # each in about 100 of 600 draws (at p = 1/6 fewer than 60 is a 1e-5 event)
+    import arviz as az
+
+    gamma_of = {("phong", "A"): 0.1, ("phong", "B"): 0.2, ("ward", "A"): 0.3}
+    gamma_of |= {("ward", "B"): 0.4, ("ggx", "A"): 0.5, ("ggx", "B"): 0.6}
+    shape = (2, 300)
+    ll = 5 * np.random.default_rng(11).standard_normal((*shape, 3, 4)) - 6.0
+
+    def idata_of(gamma):
+        post = {"gamma_object": np.full(shape, gamma), "n_object": np.ones(shape)}
+        return az.from_dict(posterior=post, log_likelihood={"y": ll})
+
+    samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+
+    def fake_families(*args, **kwargs):
+        assert kwargs["keep_fits"] is True
+        fits = {sky: (idata_of(gamma_of["phong", sky]), samples, None) for sky in "AB"}
+        fits["C"] = (idata_of(0.9), samples, None)
+        mixture = idata_of(0.15)  # the default lobe's sky mixture, the idata returned
+        mixture.posterior.attrs.update(
+            sky_family_weights=json.dumps({"A": 0.5, "B": 0.5, "C": 0.0}),
+            sky_family_most_weight="A",
+            sky_family_equal_weights=1,
+        )
+        info = {"most_weight": "A", "equal_weights": True, "seconds": 3.0}
+        posteriors = {sky: fit[0].posterior for sky, fit in fits.items()}
+        return mixture, samples, None, info | {"fits": fits, "posteriors": posteriors}
+
+    calls = []
+
+    def fake_fit(b, curves, y, usable, censored, keep, sky, seed, options, *rest, **kw):
+        calls.append((options["lobe_family"], sky))
+        return idata_of(gamma_of[options["lobe_family"], sky]), samples, None
+
+    monkeypatch.setattr(sky_families, "fit_families", fake_families)
+    monkeypatch.setattr(stacking, "joint_fit", fake_fit)
+    monkeypatch.setattr(stacking, "add_facet_posteriors", lambda *args: None)
+    choices = {"phong": "phong", "ward": "ward", "ggx": "ggx"}
+    kw = dict(option="lobe_family", default="phong", attribute="lobe_family", ties="spread")
+    got = stacking.fit_stacked(*(None,) * 6, "families", 0, {}, choices=choices, **kw)
+    assert sorted(calls) == sorted([(lobe, sky) for lobe in ("ward", "ggx") for sky in "AB"])
+    weights = json.loads(got.idata.posterior.attrs["lobe_family_weights"])
+    assert weights == pytest.approx({"phong": 1 / 3, "ward": 1 / 3, "ggx": 1 / 3})
+    assert got.scores["ward"]["weight_by_sky"] == pytest.approx({"A": 1 / 6, "B": 1 / 6})
+    assert got.record("k", {}, "b", got.best)["stacked"] is True
+    assert got.idata.posterior.attrs["lobe_family_stacked"] == 1
+    assert got.idata.posterior.attrs["sky_family_weights"] == json.dumps(
+        {"A": 0.5, "B": 0.5, "C": 0.0}
+    )  # the sky's record kept, whichever lobe's fit carries the answer
+    gamma = np.round(got.idata.posterior["gamma_object"].values.ravel(), 6)
+    for value in gamma_of.values():
+        assert np.sum(gamma == value) >= 60, value
+    assert not np.any(np.isin(gamma, [0.15, 0.9]))  # not the old mixture, not the ruled-out sky
+    # each lobe's own answer is its fits mixed over the tied skies
+    ward = np.round(got.own["ward"]["gamma_object"].values.ravel(), 6)
+    assert set(ward) == {0.3, 0.4}
 
 
 def test_a_sunless_day_leaves_the_lobes_unstacked(monkeypatch):
@@ -102,7 +170,8 @@ def test_a_sunless_day_leaves_the_lobes_unstacked(monkeypatch):
             sky_family_weights="{}", sky_family_most_weight=sky, sky_family_equal_weights=0
         )
         samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
-        return idata, samples, None, {"most_weight": sky, "equal_weights": False, "seconds": 1.0}
+        info = {"most_weight": sky, "equal_weights": False, "seconds": 1.0}
+        return idata, samples, None, info | {"fits": {}, "posteriors": {}}
 
     monkeypatch.setattr(sky_families, "fit_families", fake_families)
     calls = _fake_fits(monkeypatch, {"ward": -1.0}, spread=0.05)
