@@ -76,6 +76,7 @@ SETS = {
     "validation_holdout22": "validation_holdout22",
     "validation_holdout23": "validation_holdout23",
     "validation_holdout24": "validation_holdout24",
+    "validation_holdout25": "validation_holdout25",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -88,6 +89,7 @@ SETS = {
     "mitsuba_holdout9": "validation_mitsuba_holdout9",
     "mitsuba_holdout10": "validation_mitsuba_holdout10",
     "mitsuba_holdout11": "validation_mitsuba_holdout11",
+    "mitsuba_holdout12": "validation_mitsuba_holdout12",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -197,6 +199,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout9": ("baseline", "perez"),  # the default after stop 55, measured
     "mitsuba_holdout10": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
     "mitsuba_holdout11": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
+    "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -218,6 +221,7 @@ DEFAULT_METHODS = {
     "validation_holdout22": ("baseline", "perez"),  # and sun-side-overcast, merged (stop 58)
     "validation_holdout23": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
     "validation_holdout24": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
+    "validation_holdout25": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
 }
 
 
