@@ -254,6 +254,54 @@ def by_facet_count(sets: dict[str, list[dict]] | None = None) -> dict:
     return {"sets": {k: len(v) for k, v in sets.items()}, "few_facets": FEW_FACETS, "table": table}
 
 
+#: The seen sets of stop 62's candidate (few-facet floor): stop 59's, and
+#: the holdouts read since, each with the method that was the default when
+#: it was read (``lobes-every-sky`` for holdout 24 and Mitsuba holdout 11).
+SEEN_STOP62 = {
+    **SEEN_STOP59,
+    "validation_holdout23": "perez",
+    "mitsuba_holdout10": "perez",
+    "validation_holdout24": "lobes-every-sky",
+    "mitsuba_holdout11": "lobes-every-sky",
+}
+#: The few-facet floors tried [gamma] (the floor elsewhere stays the default's).
+FEW_GRID = np.round(np.arange(0.06, 0.2001, 0.01), 2)
+#: Stop 62's criterion: the pooled few-facet coverage the floor must reach.
+FEW_COVERAGE = 0.90
+
+
+def choose_few_facets_floor(sets: dict[str, list[dict]] | None = None) -> dict:
+    """Stop 62's candidate: the smallest floor of :data:`FEW_GRID` at which
+    the sun-lit objects whose gamma at most :data:`FEW_FACETS` facets
+    measured, pooled over both renderers' seen sets (:data:`SEEN_STOP62`),
+    hold the truth in at least :data:`FEW_COVERAGE`; with each floor's
+    :func:`figures` per renderer and pooled (``--choose-few``)."""
+    if sets is None:
+        sets = {
+            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
+            for name, method in SEEN_STOP62.items()
+        }
+    default_floor = FEW_GRID[0]
+    table = {}
+    for few_floor in FEW_GRID:
+        rng = np.random.default_rng(SEED)
+        cells = {}
+        for name, scores in sets.items():
+            for s in scores:
+                if measuring_facets(s["perez"]) > FEW_FACETS:
+                    continue
+                row = (with_floor(s["perez"], default_floor, rng, few_floor), s["truth"], True)
+                for key in (renderer(name), "pooled"):
+                    cells.setdefault(key, []).append(row)
+        table[float(few_floor)] = {key: figures(rows) for key, rows in sorted(cells.items())}
+    good = [f for f, c in table.items() if c["pooled"]["coverage"] >= FEW_COVERAGE]
+    return {
+        "sets": {k: len(v) for k, v in sets.items()},
+        "table": table,
+        "chosen": min(good) if good else None,
+    }
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", action="append", default=[], choices=sorted(SETS))
@@ -273,7 +321,18 @@ def main(argv=None) -> dict:
         action="store_true",
         help="tabulate the floors by facet count on the seen sets (SEEN_STOP59)",
     )
+    ap.add_argument(
+        "--choose-few",
+        action="store_true",
+        help="print how stop 62's few-facet floor was chosen (SEEN_STOP62)",
+    )
     args = ap.parse_args(argv)
+    if args.choose_few:
+        out = choose_few_facets_floor()
+        print(json.dumps(out, indent=1))
+        if args.json:
+            Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+        return out
     if args.by_facets:
         out = by_facet_count()
         print(json.dumps(out, indent=1))

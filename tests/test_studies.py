@@ -574,6 +574,29 @@ def test_floor_rule_tabulates_the_floors_by_facet_count():
     assert same["mitsuba"]["held"] == 2
 
 
+def test_floor_rule_chooses_the_smallest_few_facet_floor_that_holds_90_percent():
+    # stop 62's chooser: posteriors N(0.5, 0.01) of 3-facet objects, truths
+    # 0.108 away: a floor f gives a 90 % interval of about +-1.645 hypot(f,
+    # 0.01), +-0.100 at 0.06 (a miss by 0.008) and +-0.116 at 0.07 (held by
+    # 0.008; the 10 000 seeded draws move the bounds by about 0.002); with 9
+    # of 10 such objects and one truth 0.2 away (held from f = 0.122 on),
+    # 90 % is first reached at 0.07, not 0.06 and not 0.13. Objects that 4
+    # facets measured do not count.
+    fr = study_module("floor_rule")
+    scores = [_floor_score(f"ms{i:02d}", 0.608, 0.5) for i in range(9)]
+    scores.append(_floor_score("ms09", 0.7, 0.5))
+    scores.append(_floor_score("ms10", 0.9, 0.5))  # 4 facets: not counted
+    for s in scores:
+        s["perez"]["model_error"] = {"facets": 3}
+    scores[-1]["perez"]["model_error"] = {"facets": 4}
+    out = fr.choose_few_facets_floor({"mitsuba_holdout10": scores})
+    assert out["chosen"] == 0.07
+    assert out["table"][0.06]["pooled"]["held"] == 0
+    assert out["table"][0.07]["pooled"]["held"] == 9
+    assert out["table"][0.13]["pooled"]["held"] == 10
+    assert out["table"][0.07]["mitsuba"]["sun_lit"] == 10
+
+
 def test_floor_rule_chose_0_03_on_the_seen_sets():
     # stop 56's choice, on the committed scores of holdouts 17-19 and
     # Mitsuba holdouts 7-8 (96 sun-lit): floors 0.02-0.04 put both
