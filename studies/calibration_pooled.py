@@ -14,16 +14,18 @@ error), with the 90 % interval's cover and its binomial 90 % range beside.
 Fits nothing.
 
     python studies/calibration_pooled.py [--radiance validation_holdout8 ...]
-        [--mitsuba mitsuba_holdout2 ...] [--methods families materials]
+        [--mitsuba mitsuba_holdout2 ...] [--methods families materials] [--out FILE]
 
-Writes ``results/calibration_pooled.json`` and one figure per renderer,
-``results/calibration_pooled_{radiance,mitsuba}.png``.
+Writes ``results/calibration_pooled.json`` (or ``--out``) with the cover
+per class and per sky type, and one figure per renderer,
+``results/calibration_pooled_{radiance,mitsuba}.png`` (named after ``--out``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import numpy as np
 from scipy import stats
@@ -49,13 +51,14 @@ def load(set_name: str) -> list[dict] | None:
     return scores if len(scores) >= SET_SIZE else None
 
 
-def cover_table(scores: list[dict], method: str) -> dict:
-    """Per class: sun-lit sequences, how many the reported 90 % interval
-    holds, the share's 90 % Clopper-Pearson range, and the MAE of the median."""
+def cover_table(scores: list[dict], method: str, key: str = "class") -> dict:
+    """Per material class (``key="class"``) or sky type (``"category"``):
+    sun-lit sequences, how many the reported 90 % interval holds, the
+    share's 90 % Clopper-Pearson range, and the MAE of the median."""
     out = {}
-    rows = [s for s in scores if s["direct_sun"] and s.get("class") and method in s]
-    for cls in sorted({s["class"] for s in rows}) + ["all"]:
-        sub = [s for s in rows if cls in ("all", s["class"])]
+    rows = [s for s in scores if s["direct_sun"] and s.get(key) and method in s]
+    for cls in sorted({s[key] for s in rows}) + ["all"]:
+        sub = [s for s in rows if cls in ("all", s[key])]
         held = sum(_holds(s[method], s["truth"]) for s in sub)
         n = len(sub)
         ci = stats.binomtest(held, n).proportion_ci(0.90) if n else None
@@ -73,7 +76,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--radiance", nargs="*", default=list(DEFAULT_SETS["radiance"]))
     ap.add_argument("--mitsuba", nargs="*", default=list(DEFAULT_SETS["mitsuba"]))
     ap.add_argument("--methods", nargs="*", default=["families", "materials"])
+    ap.add_argument(
+        "--out",
+        default=str(RESULTS / "calibration_pooled.json"),
+        help="the summary's file; the figures are named after it (<stem>_<renderer>.png)",
+    )
     args = ap.parse_args(argv)
+    out = Path(args.out)
     summary = {}
     for renderer, names in (("radiance", args.radiance), ("mitsuba", args.mitsuba)):
         scores, used, left_out = [], [], []
@@ -84,17 +93,20 @@ def main(argv=None) -> dict:
         if not scores:
             continue
         methods = [m for m in args.methods if any(m in s for s in scores)]
-        figure = RESULTS / f"calibration_pooled_{renderer}.png"
+        figure = out.with_name(f"{out.stem}_{renderer}.png")
         summary[renderer] = {
             "sets": used,
             "not_scored_in_full": left_out,
             "cover90": {m: cover_table(scores, m) for m in methods},
+            "cover90_by_sky_type": {m: cover_table(scores, m, "category") for m in methods},
             "calibration": calibration_figure(scores, figure, methods),
         }
         for m in methods:
             for cls, row in summary[renderer]["cover90"][m].items():
                 print(renderer, m, cls, f"{row['held']}/{row['n']}", f"MAE {row['mae']:.3f}")
-    (RESULTS / "calibration_pooled.json").write_text(json.dumps(summary, indent=1))
+            for sky, row in summary[renderer]["cover90_by_sky_type"][m].items():
+                print(renderer, m, sky, f"{row['held']}/{row['n']}", f"MAE {row['mae']:.3f}")
+    out.write_text(json.dumps(summary, indent=1))
     return summary
 
 

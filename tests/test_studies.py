@@ -636,3 +636,30 @@ def test_bench_tied_skies_times_only_objects_of_few_facets(tmp_path):
     chosen = bench.boxes(str(tmp_path / "*"), 6)
     assert [p.name for p in chosen] == ["a-box", "c-box", "d-wall"]
     assert [p.name for p in bench.boxes(str(tmp_path / "*"), 2)] == ["a-box", "c-box"]
+
+
+def test_calibration_pooled_covers_per_class_and_per_sky_type():
+    # the same scores tabulated by material class and by sky type: a truth
+    # inside [0.4, 0.6] is held, one at 0.9 is not; sunless days and scores
+    # without the method are not counted
+    cp = study_module("calibration_pooled")
+
+    def score(cls, sky, truth, sun=True, method="perez"):
+        entry = {"median": 0.5, "hdi90": [0.4, 0.6], "flags": []}
+        return {"class": cls, "category": sky, "truth": truth, "direct_sun": sun, method: entry}
+
+    scores = [
+        score("rough-metal", "gensky-clear", 0.5),
+        score("rough-metal", "broken-cloud", 0.9),
+        score("smooth-plastic", "broken-cloud", 0.55),
+        score("smooth-plastic", "broken-cloud", 0.9, sun=False),
+        score("smooth-plastic", "gensky-clear", 0.9, method="other"),
+    ]
+    by_class = cp.cover_table(scores, "perez")
+    by_sky = cp.cover_table(scores, "perez", "category")
+    assert (by_class["rough-metal"]["held"], by_class["rough-metal"]["n"]) == (1, 2)
+    assert (by_class["smooth-plastic"]["held"], by_class["smooth-plastic"]["n"]) == (1, 1)
+    assert (by_sky["broken-cloud"]["held"], by_sky["broken-cloud"]["n"]) == (1, 2)
+    assert by_sky["broken-cloud"]["mae"] == pytest.approx((0.4 + 0.05) / 2)
+    assert (by_sky["all"]["held"], by_sky["all"]["n"]) == (2, 3)
+    assert by_sky["gensky-clear"]["mae"] == pytest.approx(0.0)
