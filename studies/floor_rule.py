@@ -329,22 +329,13 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if args.choose_few:
         out = choose_few_facets_floor()
-        print(json.dumps(out, indent=1))
-        if args.json:
-            Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
-        return out
-    if args.by_facets:
+    elif args.by_facets:
         out = by_facet_count()
-        print(json.dumps(out, indent=1))
-        if args.json:
-            Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
-        return out
-    if args.choose:
+    elif args.choose:
         out = choose_floor()
-        print(json.dumps(out, indent=1))
-        return out
-    sets = {name: load_scores(name, args.cached) for name in args.set}
-    out = apply_rule(sets, args.floor, args.few_facets_floor)
+    else:
+        sets = {name: load_scores(name, args.cached) for name in args.set}
+        out = apply_rule(sets, args.floor, args.few_facets_floor)
     print(json.dumps(out, indent=1))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
