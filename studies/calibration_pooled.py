@@ -101,11 +101,10 @@ def main(argv=None) -> dict:
             "cover90_by_sky_type": {m: cover_table(scores, m, "category") for m in methods},
             "calibration": calibration_figure(scores, figure, methods),
         }
-        for m in methods:
-            for cls, row in summary[renderer]["cover90"][m].items():
-                print(renderer, m, cls, f"{row['held']}/{row['n']}", f"MAE {row['mae']:.3f}")
-            for sky, row in summary[renderer]["cover90_by_sky_type"][m].items():
-                print(renderer, m, sky, f"{row['held']}/{row['n']}", f"MAE {row['mae']:.3f}")
+        for table in ("cover90", "cover90_by_sky_type"):
+            for m in methods:
+                for group, row in summary[renderer][table][m].items():
+                    print(renderer, m, group, f"{row['held']}/{row['n']}", f"MAE {row['mae']:.3f}")
     out.write_text(json.dumps(summary, indent=1))
     return summary
 

@@ -200,10 +200,7 @@ def choose_floor(sets: dict[str, list[dict]] | None = None) -> dict:
     coverage lies in 85-97 % and the pooled one is at least 90 %; with the
     coverage of every floor tried."""
     if sets is None:
-        sets = {
-            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
-            for name, method in SEEN.items()
-        }
+        sets = seen_sun_lit(SEEN)
     table = {}
     for floor in GRID:
         out = apply_rule(sets, float(floor))["by_renderer"]
@@ -230,26 +227,50 @@ SEEN_STOP59 = {
 FACET_FLOORS = ((0.06, 0.06), (0.0, 0.0), (0.03, 0.03), (0.06, 0.02), (0.06, 0.03), (0.06, 0.04))
 
 
+def seen_sun_lit(seen: dict[str, str]) -> dict[str, list[dict]]:
+    """The sun-lit scores of seen sets (set name to the method that was the
+    default when it was read), that method's entry as the default's."""
+    return {
+        name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
+        for name, method in seen.items()
+    }
+
+
+def floored_cells(sets: dict[str, list[dict]], floor: float, few_facets_floor: float, keys) -> dict:
+    """(entry, truth, direct sun) rows of the scores of ``sets``, each entry
+    widened by :func:`with_floor` (one generator seeded :data:`SEED`, drawn in
+    the sets' order), filed under every key of ``keys(set name, group)``
+    (group ``"few"`` where at most :data:`FEW_FACETS` facets measured gamma,
+    else ``"more"``); a score with no key is not widened."""
+    rng = np.random.default_rng(SEED)
+    cells = {}
+    for name, scores in sets.items():
+        for s in scores:
+            group = "few" if measuring_facets(s["perez"]) <= FEW_FACETS else "more"
+            filed = keys(name, group)
+            if not filed:
+                continue
+            entry = with_floor(s["perez"], floor, rng, few_facets_floor)
+            row = (entry, s["truth"], s["direct_sun"])
+            for key in filed:
+                cells.setdefault(key, []).append(row)
+    return cells
+
+
 def by_facet_count(sets: dict[str, list[dict]] | None = None) -> dict:
     """:func:`figures` of the sun-lit reported intervals, per
     renderer and per group (at most :data:`FEW_FACETS` measuring facets, or
     more), for each pair of floors of :data:`FACET_FLOORS`, on the seen
     sets of :data:`SEEN_STOP59` (stop 59's lead, ``--by-facets``)."""
     if sets is None:
-        sets = {
-            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
-            for name, method in SEEN_STOP59.items()
-        }
+        sets = seen_sun_lit(SEEN_STOP59)
+
+    def keys(name, group):
+        return (f"{renderer(name)}:{group}", renderer(name))
+
     table = {}
     for few_floor, floor in FACET_FLOORS:
-        rng = np.random.default_rng(SEED)
-        cells = {}
-        for name, scores in sets.items():
-            for s in scores:
-                entry = with_floor(s["perez"], floor, rng, few_floor)
-                group = "few" if measuring_facets(s["perez"]) <= FEW_FACETS else "more"
-                for key in (f"{renderer(name)}:{group}", renderer(name)):
-                    cells.setdefault(key, []).append((entry, s["truth"], s["direct_sun"]))
+        cells = floored_cells(sets, floor, few_floor, keys)
         table[f"{few_floor}/{floor}"] = {key: figures(rows) for key, rows in sorted(cells.items())}
     return {"sets": {k: len(v) for k, v in sets.items()}, "few_facets": FEW_FACETS, "table": table}
 
@@ -277,22 +298,15 @@ def choose_few_facets_floor(sets: dict[str, list[dict]] | None = None) -> dict:
     hold the truth in at least :data:`FEW_COVERAGE`; with each floor's
     :func:`figures` per renderer and pooled (``--choose-few``)."""
     if sets is None:
-        sets = {
-            name: [r for r in load_scores(name, False, method) if r["direct_sun"]]
-            for name, method in SEEN_STOP62.items()
-        }
-    default_floor = FEW_GRID[0]
+        sets = seen_sun_lit(SEEN_STOP62)
     table = {}
-    for few_floor in FEW_GRID:
-        rng = np.random.default_rng(SEED)
-        cells = {}
-        for name, scores in sets.items():
-            for s in scores:
-                if measuring_facets(s["perez"]) > FEW_FACETS:
-                    continue
-                row = (with_floor(s["perez"], default_floor, rng, few_floor), s["truth"], True)
-                for key in (renderer(name), "pooled"):
-                    cells.setdefault(key, []).append(row)
+    for few_floor in FEW_GRID:  # only objects of few facets are filed, each at few_floor
+        cells = floored_cells(
+            sets,
+            few_floor,
+            few_floor,
+            lambda name, group: (renderer(name), "pooled") if group == "few" else (),
+        )
         table[float(few_floor)] = {key: figures(rows) for key, rows in sorted(cells.items())}
     good = [f for f, c in table.items() if c["pooled"]["coverage"] >= FEW_COVERAGE]
     return {
