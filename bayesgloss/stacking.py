@@ -334,9 +334,7 @@ def fit_stacked(
             args, illumination, seed, options, {k: opts(k) for k in labels}, progress, jobs
         )
     own = {label: fits[label][0].posterior.copy(deep=True) for label in labels}
-    scores = sky_families.loo_stacking_weights({label: fits[label][0] for label in labels})
-    if ties == "spread":
-        scores = spread_tied_weights(scores)
+    scores = _choice_weights({label: fits[label][0] for label in labels}, ties, guard=False)
     weights = np.array([scores[label]["weight"] for label in labels])
     best = labels[int(np.argmax(weights))]
     idata, samples, used = fits[best]
@@ -361,16 +359,17 @@ def fit_stacked(
     return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds)
 
 
-def _weights_within(idatas: dict, ties: str) -> dict:
-    """Stacking weights of the choices' fits under one sky, with the sky
-    stack's guard where their PSIS-LOO is unreliable
-    (:func:`bayesgloss.sky_families.equal_when_unreliable`) and, where it
-    is not, ``ties`` as in :func:`fit_stacked`."""
+def _choice_weights(idatas: dict, ties: str, guard: bool) -> dict:
+    """Stacking weights of the choices' fits under one sky, ``ties`` as in
+    :func:`fit_stacked`. ``guard``: equal weights where their PSIS-LOO is
+    unreliable (:func:`bayesgloss.sky_families.equal_when_unreliable`, the
+    sky stack's guard; used under each near sky, not under the chosen one)."""
     scores = sky_families.loo_stacking_weights(idatas)
-    guarded = sky_families.equal_when_unreliable(scores)
-    if guarded is scores and ties == "spread":
-        guarded = spread_tied_weights(scores)
-    return guarded
+    if guard:
+        guarded = sky_families.equal_when_unreliable(scores)
+        if guarded is not scores:
+            return guarded
+    return spread_tied_weights(scores) if ties == "spread" else scores
 
 
 def _stacked_under_near_skies(
@@ -394,7 +393,10 @@ def _stacked_under_near_skies(
             if label != default:
                 fits[label, sky] = fitted[label, sky]
                 post[label, sky] = fitted[label, sky][0].posterior
-    within = {sky: _weights_within({lb: fits[lb, sky][0] for lb in labels}, ties) for sky in near}
+    within = {
+        sky: _choice_weights({lb: fits[lb, sky][0] for lb in labels}, ties, guard=True)
+        for sky in near
+    }
     pairs = [(label, sky) for sky in near for label in labels]
     joint = np.array([sky_w[sky] * within[sky][label]["weight"] for label, sky in pairs])
     joint /= joint.sum()
