@@ -71,6 +71,10 @@ SEED = 20261202
 BAND, NOMINAL = (0.85, 0.97), 0.90
 #: Conditions (2) and (4).
 POOLED_MIN, CONFIDENT_MISS_MAX = 0.85, 0.10
+#: Stop 62's condition (5), where a few-facet floor is the candidate: the
+#: sun-lit few-facet objects' pooled median width at most this [gamma].
+FEW_WIDTH_MAX = 0.5
+FIVE = "(5) few-facet objects' pooled median width at most 0.5"
 
 
 def renderer(set_name: str) -> str:
@@ -157,19 +161,32 @@ def apply_rule(
     :func:`with_floor`'s."""
     rng = np.random.default_rng(SEED)
     rows = {"default": {}, "candidate": {}}
+    groups = {"default": {}, "candidate": {}}  # "<renderer>:<few|more>" and "<few|more>"
     for name, scores in sets.items():
         for s in scores:
             entry = s["perez"]
             if "object_quantiles" not in entry:
                 raise ValueError(f"{name}: {s['bundle']} has no object quantiles to widen")
             row = (entry, s["truth"], s["direct_sun"])
-            rows["default"].setdefault(renderer(name), []).append(row)
             cand = (with_floor(entry, floor, rng, few_facets_floor), s["truth"], s["direct_sun"])
-            rows["candidate"].setdefault(renderer(name), []).append(cand)
+            group = "few" if measuring_facets(entry) <= FEW_FACETS else "more"
+            for m, r in (("default", row), ("candidate", cand)):
+                rows[m].setdefault(renderer(name), []).append(r)
+                for key in (f"{renderer(name)}:{group}", group):
+                    groups[m].setdefault(key, []).append(r)
     by_renderer = {
         r: {m: figures(rows[m][r]) for m in ("default", "candidate")} for r in rows["default"]
     }
     pooled = {m: figures([x for v in rows[m].values() for x in v]) for m in rows}
+    by_group = {
+        key: {m: figures(groups[m][key]) for m in groups} for key in sorted(groups["default"])
+    }
+    decision = decide(pooled["default"], pooled["candidate"], by_renderer)
+    if few_facets_floor is not None:  # stop 62's rule adds (5)
+        few = by_group.get("few", {}).get("candidate", {}).get("median_width")
+        met = decision.pop("met") and bool(few is not None and few <= FEW_WIDTH_MAX)
+        decision[FIVE] = bool(few is not None and few <= FEW_WIDTH_MAX)
+        decision["met"] = met
     return {
         "floor": floor,
         "few_facets_floor": few_facets_floor,
@@ -177,7 +194,8 @@ def apply_rule(
         "sets": {name: len(scores) for name, scores in sets.items()},
         "by_renderer": by_renderer,
         "pooled": pooled,
-        "decision": decide(pooled["default"], pooled["candidate"], by_renderer),
+        "by_facet_group": by_group,
+        "decision": decision,
     }
 
 

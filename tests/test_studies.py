@@ -506,6 +506,7 @@ def _floor_score(name: str, truth: float, centre: float, direct_sun: bool = True
     entry = {
         "object_quantiles": norm.ppf(levels, centre, 0.01).tolist(),
         "facet_gamma": {"mean": [centre] * 6, "sd": [0.01] * 6},
+        "model_error": {"facets": 6},
         "median": centre,
         "hdi90": [centre - 0.1, centre + 0.1],  # what the default (floor 0.06) reported
         "flags": [],
@@ -595,6 +596,45 @@ def test_floor_rule_chooses_the_smallest_few_facet_floor_that_holds_90_percent()
     assert out["table"][0.07]["pooled"]["held"] == 9
     assert out["table"][0.13]["pooled"]["held"] == 10
     assert out["table"][0.07]["mitsuba"]["sun_lit"] == 10
+
+
+def test_floor_rule_condition_five_refuses_a_few_facet_floor_wider_than_half():
+    # stop 62's rule adds (5): the sun-lit few-facet objects' pooled median
+    # width at most 0.5. Ten agreeing 1-facet objects, N(0.5, 0.01): at a
+    # few-facet floor of 0.13 the width is 2 x 1.645 x hypot(0.13, 0.01)
+    # = 0.43, at 0.2 it is 0.66 (draws' error about 0.01 either way)
+    fr = study_module("floor_rule")
+    scores = [_floor_score(f"ms{i:02d}", 0.5, 0.5) for i in range(10)]
+    for s in scores:
+        s["perez"]["model_error"] = {"facets": 1}
+    ok = fr.apply_rule({"mitsuba_holdout12": scores}, 0.06, few_facets_floor=0.13)
+    wide = fr.apply_rule({"mitsuba_holdout12": scores}, 0.06, few_facets_floor=0.2)
+    assert abs(ok["by_facet_group"]["few"]["candidate"]["median_width"] - 0.43) < 0.01
+    assert ok["decision"][fr.FIVE] and ok["decision"]["met"]
+    assert not wide["decision"][fr.FIVE] and not wide["decision"]["met"]
+    assert fr.FIVE not in fr.apply_rule({"mitsuba_holdout12": scores}, 0.06)["decision"]
+
+
+def test_floor_rule_reads_holdout25_and_mitsuba12_as_stop_63_decided():
+    # stop 62's rule on the default's committed scores: the few-facet floor
+    # 0.13 holds 10 of the 11 sun-lit few-facet objects (the default 9),
+    # Radiance 18 of 18 either way, Mitsuba 18 of 19 (the default 17) with
+    # no confident miss, the few-facet median width 0.43: met
+    fr = study_module("floor_rule")
+    sets = {
+        n: fr.load_scores(n, cached=False) for n in ("validation_holdout25", "mitsuba_holdout12")
+    }
+    out = fr.apply_rule(sets, 0.06, few_facets_floor=0.13)
+    few = out["by_facet_group"]["few"]
+    assert (few["default"]["held"], few["candidate"]["held"], few["candidate"]["sun_lit"]) == (
+        9,
+        10,
+        11,
+    )
+    assert round(few["candidate"]["median_width"], 2) == 0.43
+    r, m = (out["by_renderer"][k]["candidate"] for k in ("radiance", "mitsuba"))
+    assert (r["held"], r["sun_lit"], m["held"], m["sun_lit"]) == (18, 18, 18, 19)
+    assert out["decision"]["met"]
 
 
 def test_floor_rule_chose_0_03_on_the_seen_sets():
