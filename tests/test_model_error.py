@@ -49,6 +49,20 @@ def test_model_error_sd_adds_floor_and_facets_in_quadrature():
     assert e["facets"] == 3 and e["floor"] == 0.03
 
 
+def test_model_error_floor_follows_the_count_of_measuring_facets():
+    # three facets measuring gamma keep the few-facets floor, four take the
+    # lower one; a facet with no measurement (NaN, sd 0) does not count
+    agree = np.full(4, 0.5), np.full(4, 0.02)  # no disagreement: sd = floor
+    three = me.model_error_sd(agree[0][:3], agree[1][:3])
+    four = me.model_error_sd(*agree)
+    assert three["facets"] == 3 and three["sd"] == pytest.approx(me.FEW_FACETS_FLOOR)
+    assert four["facets"] == 4 and four["sd"] == pytest.approx(me.MODEL_ERROR_FLOOR)
+    assert me.FEW_FACETS == 3 and me.FEW_FACETS_FLOOR > me.MODEL_ERROR_FLOOR
+    unmeasured = me.model_error_sd([0.5, 0.5, 0.5, np.nan, 0.5], [0.02, 0.02, 0.02, 0.02, 0.0])
+    assert unmeasured["facets"] == 3 and unmeasured["floor"] == me.FEW_FACETS_FLOOR
+    assert me.model_error_sd(*agree, floor=0.1)["floor"] == 0.1  # a number fixes it
+
+
 def test_with_model_error_widens_and_clips_at_the_bounds():
     rng = np.random.default_rng(4)
     mid = me.with_model_error(np.full(200_000, 0.5), 0.1, rng)
