@@ -50,6 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bayesgloss.model_error import FEW_FACETS
+
 HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
@@ -61,10 +63,10 @@ from validate_radiance import _holds as holds  # noqa: E402
 
 #: The candidate floor of the rule (studies/README.md, stop 56).
 CANDIDATE_FLOOR = 0.03
-#: Stop 59's candidate: objects whose gamma at most this many facets
-#: measured keep :data:`FEW_FACETS_FLOOR` (``--few-facets-floor``).
-FEW_FACETS = 3
-FEW_FACETS_FLOOR = 0.06
+#: Stop 59's candidate: objects whose gamma at most FEW_FACETS facets
+#: measured (``bayesgloss.model_error``'s count) keep this floor
+#: (``--few-facets-floor``); stop 62's took 0.13 and joined the default.
+STOP59_FEW_FACETS_FLOOR = 0.06
 #: The seed of the candidate's model-error draws.
 SEED = 20261202
 #: The band of issue 14 for a 90 % interval's coverage, and its centre.

@@ -544,7 +544,7 @@ def test_floor_rule_keeps_the_few_facets_floor_where_few_facets_measured():
     # model's error), one that 4 or more measured gets --floor; the
     # widths follow 2 x 1.645 x hypot(floor, 0.01) within the draws' 0.01
     fr = study_module("floor_rule")
-    assert fr.FEW_FACETS == 3 and fr.FEW_FACETS_FLOOR == 0.06
+    assert fr.FEW_FACETS == 3 and fr.STOP59_FEW_FACETS_FLOOR == 0.06
     few, many = _floor_score("ms00", 0.5, 0.5), _floor_score("ms01", 0.5, 0.5)
     few["perez"]["model_error"] = {"facets": 3}
     many["perez"]["model_error"] = {"facets": 4}
