@@ -13,7 +13,7 @@ flagged and the unflagged objects' count, MAE, how many intervals held the
 truth and their median width. It is a reading of seen data that says what
 the flag is worth to a user; it changes no answer, so it has no rule.
 
-    python studies/sun_flag_seen.py [--json studies/results/sun_flag_seen.json]
+    python studies/sun_flag_seen.py [--set NAME ...] [--json studies/results/sun_flag_seen.json]
 """
 
 from __future__ import annotations
@@ -81,8 +81,11 @@ def read_sets(names) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", help="write the table here")
+    ap.add_argument(
+        "--set", action="append", choices=sorted(SETS), help="these sets only (default: every set)"
+    )
     args = ap.parse_args(argv)
-    read = read_sets(sorted(SETS))
+    read = read_sets(sorted(args.set or SETS))
     table = {" / ".join(k): figures(v) for k, v in sorted(read["cells"].items())}
     out = {
         "sun_hidden": SUN_HIDDEN,
