@@ -86,6 +86,7 @@ from .joint_estimate import (
     joint_fit,
     object_convergence,
     sky_model_summary,
+    sun_flags,
 )
 from .model_error import model_error_sd, with_model_error
 from .object_shadow import check_ground_shadow, convex_shadow_state, default_ground_shadow
@@ -546,6 +547,8 @@ def _summarise(
     }
     if used is not None:
         summary["frames"] = frame_summary(idata, b, used, samples)
+        summary["object"]["sun_unidentified_share"], flags = sun_flags(idata)
+        summary["object"]["flags"] += flags
         summary["object"]["convergence"] = object_convergence(samples, used)
         summary["sky_models"] = sky_model_summary(idata)
         post = idata.posterior

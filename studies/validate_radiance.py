@@ -77,6 +77,7 @@ SETS = {
     "validation_holdout23": "validation_holdout23",
     "validation_holdout24": "validation_holdout24",
     "validation_holdout25": "validation_holdout25",
+    "validation_holdout26": "validation_holdout26",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -90,6 +91,7 @@ SETS = {
     "mitsuba_holdout10": "validation_mitsuba_holdout10",
     "mitsuba_holdout11": "validation_mitsuba_holdout11",
     "mitsuba_holdout12": "validation_mitsuba_holdout12",
+    "mitsuba_holdout13": "validation_mitsuba_holdout13",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -200,6 +202,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout10": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
     "mitsuba_holdout11": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
     "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
+    "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -222,6 +225,7 @@ DEFAULT_METHODS = {
     "validation_holdout23": ("baseline", "perez"),  # the floor by facet count applied (stop 59)
     "validation_holdout24": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
     "validation_holdout25": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
+    "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
 }
 
 

@@ -357,6 +357,10 @@ def test_per_frame_estimate_writes_frames_and_reports(tmp_path):
     assert abs(np.log(level)) < np.log(1.25), sun
     assert np.all(np.abs(np.log(sun[2:-2] / level)) < np.log(1.4)), sun
     assert s["object"]["model"].startswith("one material")
+    # a glossy object under a clear sun: whether the sun shone is told in
+    # every frame, so the object is not flagged sun-not-identifiable
+    assert s["object"]["sun_unidentified_share"] <= 0.2, s["frames"]
+    assert "sun-not-identifiable" not in s["object"]["flags"]
     # the run's own convergence, frame by frame, and the object's record of it agree
     c = s["object"]["convergence"]
     assert c["frames_not_converged"] == [f["frame"] for f in s["frames"] if not f["converged"]]

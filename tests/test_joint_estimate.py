@@ -91,3 +91,33 @@ def test_an_unknown_clipped_treatment_is_refused_before_any_fit(tmp_path):
     path = make_synthetic_bundle(tmp_path / "b", seed=2)
     with pytest.raises(ValueError, match="clipped entries: unknown treatment 'keep'"):
         estimate.estimate_bundle(path, clipped="keep")
+
+
+def test_sun_flags_flag_an_object_whose_frames_cannot_tell_a_hidden_from_a_clear_sun():
+    # a frame's sun is not identified where its 90 % interval runs from below
+    # 0.1 to above 0.5 of the model's: draws uniform on [0, 1.2] (5-95 %:
+    # 0.06-1.14) are; a clear sun N(1, 0.05), a hidden one on [0, 0.05] and
+    # a dimmed one on [0.2, 1.2] are not. More than half such frames flag
+    # the object; exactly half does not
+    import xarray as xr
+
+    from bayesgloss.joint_estimate import sun_flags
+
+    rng = np.random.default_rng(63)
+    draws = {
+        "unknown": rng.uniform(0.0, 1.2, (2, 500)),
+        "clear": rng.normal(1.0, 0.05, (2, 500)),
+        "hidden": rng.uniform(0.0, 0.05, (2, 500)),
+        "dimmed": rng.uniform(0.2, 1.2, (2, 500)),
+    }
+
+    def idata(*frames):
+        sun = np.stack([draws[f] for f in frames], axis=-1)
+        return SimpleNamespace(posterior=xr.Dataset({"sun": (("chain", "draw", "frame"), sun)}))
+
+    share, flags = sun_flags(idata("unknown", "unknown", "unknown", "clear"))
+    assert share == 0.75 and flags == ["sun-not-identifiable"]
+    share, flags = sun_flags(idata("unknown", "unknown", "hidden", "dimmed"))
+    assert share == 0.5 and flags == []
+    assert sun_flags(idata("clear", "hidden", "dimmed")) == (0.0, [])
+    assert sun_flags(SimpleNamespace(posterior=xr.Dataset())) == (None, [])

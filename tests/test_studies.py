@@ -703,3 +703,18 @@ def test_calibration_pooled_covers_per_class_and_per_sky_type():
     assert by_sky["broken-cloud"]["mae"] == pytest.approx((0.4 + 0.05) / 2)
     assert (by_sky["all"]["held"], by_sky["all"]["n"]) == (2, 3)
     assert by_sky["gensky-clear"]["mae"] == pytest.approx(0.0)
+
+
+def test_sun_flag_seen_reads_the_committed_scores_as_stop_63_did():
+    # each score keeps every frame's sun quantiles: a frame whose interval
+    # runs from below 0.1 to above 0.5 is not identified; on the 23 seen
+    # sets with per-frame suns, 37 of 393 sun-lit objects are flagged, and
+    # their intervals held 27 (the unflagged 329 of 356)
+    sf = study_module("sun_flag_seen")
+    assert sf.unidentified_share({"sun_q05": [0.0, 0.0, 0.3], "sun_q95": [1.0, 0.4, 1.0]}) == 1 / 3
+    assert sf.unidentified_share({"sun": [1.0]}) is None
+    out = sf.main([])
+    assert len(out["sets"]) == 23
+    flagged, rest = (out["table"][f"pooled / sun-lit / {k}"] for k in ("flagged", "not flagged"))
+    assert (flagged["n"], flagged["held"], rest["n"], rest["held"]) == (37, 27, 356, 329)
+    assert flagged["mae"] > 2 * rest["mae"]
