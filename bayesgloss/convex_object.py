@@ -39,6 +39,7 @@ day, which its centre alone does not see.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,11 +145,25 @@ def convex_object(normal, center) -> ConvexObject:
     ------
     ValueError
         Where the planes enclose no volume above the ground.
+
+    Notes
+    -----
+    The last few objects are kept (one fit asks for its object two or
+    three times: whether the facets bound one, then its shadow's points),
+    so their arrays are read-only.
     """
+    n = np.ascontiguousarray(normal, dtype=float)
+    c = np.ascontiguousarray(center, dtype=float)
+    return _convex_object(n.tobytes(), c.tobytes(), n.shape, c.shape)
+
+
+@functools.lru_cache(maxsize=16)
+def _convex_object(normal: bytes, center: bytes, n_shape, c_shape) -> ConvexObject:
+    """:func:`convex_object` of the normals and centres held as bytes."""
     from scipy.spatial import HalfspaceIntersection
 
-    n = np.asarray(normal, dtype=float)
-    c = np.asarray(center, dtype=float)
+    n = np.frombuffer(normal, dtype=float).reshape(n_shape)
+    c = np.frombuffer(center, dtype=float).reshape(c_shape)
     o = object_axis(n, c)
     mirrored_n = n * np.array([-1.0, -1.0, 1.0])
     mirrored_c = np.column_stack([2 * o - c[:, :2], c[:, 2]])
@@ -168,6 +183,8 @@ def convex_object(normal, center) -> ConvexObject:
     for f in range(len(n)):
         on = np.abs(vertices @ n[f] - n[f] @ c[f]) <= 1e-6 * scale
         polygons.append(_ordered(vertices[on], n[f]) if on.sum() >= 3 else np.zeros((0, 3)))
+    for array in (vertices, o, *polygons):
+        array.setflags(write=False)
     return ConvexObject(vertices, polygons, o)
 
 

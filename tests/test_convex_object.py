@@ -73,3 +73,18 @@ def test_facet_points_cover_a_polygon_evenly():
     inside = facet_points(tri, np.array([0, 0, 1.0]), per_side=4)
     assert len(inside) == 8
     assert np.all(inside[:, 0] + inside[:, 1] <= 2) and np.allclose(inside[:, 2], 1.0)
+
+
+def test_convex_object_is_built_once_for_the_same_facets():
+    # a fit asks for its object two or three times: the same facets (even
+    # as other arrays of the same values) give the very same object, whose
+    # arrays cannot be changed under another caller; other facets another
+    f = geometry.box()
+    first = convex_object(f.normal, f.center)
+    assert convex_object(np.array(f.normal), np.array(f.center)) is first
+    with pytest.raises(ValueError):
+        first.vertices[0, 0] = 1.0
+    moved = np.asarray(f.center) + np.array([0.5, 0.0, 0.0])
+    other = convex_object(f.normal, moved)
+    assert other is not first
+    assert np.allclose(other.vertices.mean(axis=0)[:2], first.vertices.mean(axis=0)[:2] + [0.5, 0])
