@@ -46,6 +46,7 @@ __all__ = [
     "add_facet_posteriors",
     "frame_summary",
     "sun_flags",
+    "sun_not_identified",
     "frame_convergence",
     "object_convergence",
     "sky_model_summary",
@@ -414,6 +415,13 @@ SUN_HIDDEN, SUN_SHOWN = 0.1, 0.5
 SUN_UNIDENTIFIED_SHARE = 0.5
 
 
+def sun_not_identified(q05, q95) -> np.ndarray:
+    """Whether each frame's sun is not identified, from its 5 and 95 %
+    quantiles relative to the sky model's sun (:data:`SUN_HIDDEN`,
+    :data:`SUN_SHOWN`)."""
+    return (np.asarray(q05, float) < SUN_HIDDEN) & (np.asarray(q95, float) > SUN_SHOWN)
+
+
 def sun_flags(idata) -> tuple[float | None, list[str]]:
     """The share of frames whose sun is not identified (:data:`SUN_HIDDEN`,
     :data:`SUN_SHOWN`) and the object's flag ``sun-not-identifiable`` where
@@ -424,7 +432,7 @@ def sun_flags(idata) -> tuple[float | None, list[str]]:
         return None, []
     sun = idata.posterior["sun"].values
     lo, hi = np.quantile(sun.reshape(-1, sun.shape[-1]), [0.05, 0.95], axis=0)
-    share = float(np.mean((lo < SUN_HIDDEN) & (hi > SUN_SHOWN)))
+    share = float(np.mean(sun_not_identified(lo, hi)))
     return share, ["sun-not-identifiable"] if share > SUN_UNIDENTIFIED_SHARE else []
 
 

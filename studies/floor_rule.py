@@ -186,9 +186,9 @@ def apply_rule(
     decision = decide(pooled["default"], pooled["candidate"], by_renderer)
     if few_facets_floor is not None:  # stop 62's rule adds (5)
         few = by_group.get("few", {}).get("candidate", {}).get("median_width")
-        met = decision.pop("met") and bool(few is not None and few <= FEW_WIDTH_MAX)
+        met = decision.pop("met")  # (5) goes before it
         decision[FIVE] = bool(few is not None and few <= FEW_WIDTH_MAX)
-        decision["met"] = met
+        decision["met"] = met and decision[FIVE]
     return {
         "floor": floor,
         "few_facets_floor": few_facets_floor,

@@ -713,8 +713,8 @@ def test_sun_flag_seen_reads_the_committed_scores_as_stop_63_did():
     sf = study_module("sun_flag_seen")
     assert sf.unidentified_share({"sun_q05": [0.0, 0.0, 0.3], "sun_q95": [1.0, 0.4, 1.0]}) == 1 / 3
     assert sf.unidentified_share({"sun": [1.0]}) is None
-    out = sf.main([])
-    assert len(out["sets"]) == 23
+    out = sf.main([])  # the seen sets only: no set scored after stop 63's reading
+    assert len(out["sets"]) == 23 and "validation_holdout26" not in out["sets"]
     flagged, rest = (out["table"][f"pooled / sun-lit / {k}"] for k in ("flagged", "not flagged"))
     assert (flagged["n"], flagged["held"], rest["n"], rest["held"]) == (37, 27, 356, 329)
     assert flagged["mae"] > 2 * rest["mae"]
