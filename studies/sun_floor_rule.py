@@ -1,4 +1,4 @@
-"""A model-error floor where the object's sun is not identified, chosen on seen sets, judged on unseen ones.
+"""A model-error floor where the sun is not identified: chosen on seen sets, judged on unseen ones.
 
 Where more than half an object's frames have a sun that the data do not
 identify (:func:`bayesgloss.joint_estimate.sun_flags`, the flag
@@ -39,7 +39,8 @@ quantiles and each facet's posterior mean and sd (:func:`model_error_floor.widen
 Usage::
 
     python studies/sun_floor_rule.py --choose [--json FILE]
-    python studies/sun_floor_rule.py --set validation_holdout26 --set mitsuba_holdout13 [--json FILE]
+    python studies/sun_floor_rule.py --set validation_holdout26 --set mitsuba_holdout13 \\
+        [--json FILE]
 """
 
 from __future__ import annotations

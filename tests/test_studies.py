@@ -718,3 +718,59 @@ def test_sun_flag_seen_reads_the_committed_scores_as_stop_63_did():
     flagged, rest = (out["table"][f"pooled / sun-lit / {k}"] for k in ("flagged", "not flagged"))
     assert (flagged["n"], flagged["held"], rest["n"], rest["held"]) == (37, 27, 356, 329)
     assert flagged["mae"] > 2 * rest["mae"]
+
+
+def _sun_score(name, truth, direct_sun, hidden_frames, frames=4, centre=0.5):
+    """A score whose first ``hidden_frames`` of ``frames`` have a sun the
+    data do not identify (interval 0-1), the rest an identified one."""
+    score = _floor_score(name, truth, centre, direct_sun)
+    score["perez"]["sun_q05"] = [0.0] * hidden_frames + [0.8] * (frames - hidden_frames)
+    score["perez"]["sun_q95"] = [1.0] * hidden_frames + [1.2] * (frames - hidden_frames)
+    return score
+
+
+def test_sun_floor_rule_widens_only_objects_whose_sun_is_not_identified():
+    # an object with 3 of 4 frames' sun unidentified is widened at the floor
+    # 0.20 (6 agreeing facets: sd hypot(0.20, 0.01), width about
+    # 2 x 1.645 x 0.2 = 0.66 within the draws' 0.02) and flagged
+    # gloss-not-identifiable (wider than 0.6); one with 2 of 4 (a share of
+    # exactly one half) keeps the default's entry and flags
+    sr = study_module("sun_floor_rule")
+    rng = np.random.default_rng(0)
+    hidden = sr.candidate(_sun_score("vs00", 0.5, False, 3)["perez"], 0.20, rng)
+    assert abs(np.ptp(hidden["hdi90"]) - 2 * 1.645 * np.hypot(0.20, 0.01)) < 0.02
+    assert "gloss-not-identifiable" in hidden["flags"]
+    half = _sun_score("vs01", 0.5, False, 2)["perez"]
+    assert sr.candidate(half, 0.20, rng) == half
+    # the flag by width alone, without a floor: a reported interval of 0.7
+    wide = {**half, "hdi90": [0.1, 0.8]}
+    assert sr.with_flag_by_width(wide)["flags"] == ["gloss-not-identifiable"]
+
+
+def test_sun_floor_rule_conditions_five_and_six():
+    # a sunless day read 0.4 for a truth 0.55 fails the overcast rule under
+    # the default (interval 0.3-0.5 misses, no flag); the candidate's
+    # interval (width 0.66, unclipped at 0.4 +- 0.33) holds it and is flagged, so (5) and (6) are met.
+    # Sun-lit objects with identified suns are untouched: (1)-(4) as the
+    # default's, which all hold here
+    sr = study_module("sun_floor_rule")
+    sunless = _sun_score("vs00", 0.55, False, 4, centre=0.4)
+    lit = [_sun_score(f"vs{i:02d}", 0.52, True, 0) for i in range(1, 11)]
+    out = sr.apply_rule({"validation_holdout26": [sunless, *lit]}, 0.20)
+    assert out["pooled"]["default"]["overcast_ok"] == 0
+    assert out["pooled"]["candidate"]["overcast_ok"] == 1
+    assert out["sun_not_identified"]["default"]["held"] == 0
+    assert out["sun_not_identified"]["candidate"]["held"] == 1
+    assert out["decision"]["met"]
+    # with no sunless gain, (6) fails
+    out = sr.apply_rule({"validation_holdout26": lit}, 0.20)
+    assert not out["decision"]["(6) overcast rule on more sunless sequences"]
+
+
+def test_sun_floor_rule_chose_0_20_on_the_seen_sets():
+    # the criterion, fixed before any floor was tried: the smallest floor of
+    # the 0.01 grid at which the 146 seen flagged objects hold 90 %
+    sr = study_module("sun_floor_rule")
+    out = sr.choose_sun_floor()
+    assert out["flagged"] == 146 and out["chosen"] == sr.CANDIDATE_SUN_FLOOR == 0.20
+    assert out["table"][0.19] < 0.90 <= out["table"][0.2]
