@@ -750,9 +750,9 @@ def test_sun_floor_rule_widens_only_objects_whose_sun_is_not_identified():
 def test_sun_floor_rule_conditions_five_and_six():
     # a sunless day read 0.4 for a truth 0.55 fails the overcast rule under
     # the default (interval 0.3-0.5 misses, no flag); the candidate's
-    # interval (width 0.66, unclipped at 0.4 +- 0.33) holds it and is flagged, so (5) and (6) are met.
-    # Sun-lit objects with identified suns are untouched: (1)-(4) as the
-    # default's, which all hold here
+    # interval (width 0.66, unclipped at 0.4 +- 0.33) holds it and is
+    # flagged, so (5) and (6) are met. Sun-lit objects with identified
+    # suns are untouched: (1)-(4) as the default's, which all hold here
     sr = study_module("sun_floor_rule")
     sunless = _sun_score("vs00", 0.55, False, 4, centre=0.4)
     lit = [_sun_score(f"vs{i:02d}", 0.52, True, 0) for i in range(1, 11)]
