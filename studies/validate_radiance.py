@@ -78,6 +78,7 @@ SETS = {
     "validation_holdout24": "validation_holdout24",
     "validation_holdout25": "validation_holdout25",
     "validation_holdout26": "validation_holdout26",
+    "validation_holdout27": "validation_holdout27",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -226,6 +227,7 @@ DEFAULT_METHODS = {
     "validation_holdout24": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
     "validation_holdout25": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
+    "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
 }
 
 
