@@ -774,3 +774,42 @@ def test_sun_floor_rule_chose_0_20_on_the_seen_sets():
     out = sr.choose_sun_floor()
     assert out["flagged"] == 146 and out["chosen"] == sr.CANDIDATE_SUN_FLOOR == 0.20
     assert out["table"][0.19] < 0.90 <= out["table"][0.2]
+
+
+def test_sun_floor_rule_second_test_asks_five_six_and_seven():
+    # the second test keeps (5) and (6) and adds (7): the sunless MAE may
+    # rise by at most 0.01 (the candidate moves a median only where its
+    # wider draws clip at 0 or 1)
+    sr = study_module("sun_floor_rule")
+    sunless = _sun_score("vs00", 0.55, False, 4, centre=0.4)
+    lit = [_sun_score(f"vs{i:02d}", 0.52, True, 0) for i in range(1, 11)]
+    out = sr.apply_rule({"validation_holdout27": [sunless, *lit]}, 0.20)
+    assert out["sunless_mae"]["default"] == pytest.approx(0.15)
+    res = sr.second_test(out)
+    assert res["met"] and len(res) == 4
+    out["sunless_mae"]["candidate"] = out["sunless_mae"]["default"] + 0.011
+    assert not sr.second_test(out)["met"]
+
+
+def test_sun_floor_rule_reads_holdout26_and_mitsuba13_as_stop_64_decided():
+    # the committed scores give what stop 64 read: every condition met but
+    # (5), the flagged objects' 10 of 10 against the default's 9 of 10
+    sr = study_module("sun_floor_rule")
+    sets = {n: sr.load_scores(n, False) for n in ("validation_holdout26", "mitsuba_holdout13")}
+    out = sr.apply_rule(sets)
+    cover = out["sun_not_identified"]
+    assert (cover["default"]["held"], cover["candidate"]["held"], cover["candidate"]["n"]) == (
+        9,
+        10,
+        10,
+    )
+    assert (out["pooled"]["default"]["overcast_ok"], out["pooled"]["candidate"]["overcast_ok"]) == (
+        5,
+        8,
+    )
+    d = out["decision"]
+    assert not d["met"]
+    assert [k for k, v in d.items() if v is False] == [
+        "(5) flagged objects' coverage in 85-97 % or no farther from 90 %",
+        "met",
+    ]
