@@ -370,9 +370,14 @@ def main(argv=None) -> dict:
     else:
         sets = {name: load_scores(name, args.cached) for name in args.set}
         out = apply_rule(sets, args.floor, args.few_facets_floor)
+    return report(out, args.json)
+
+
+def report(out: dict, path: str | None) -> dict:
+    """Print a rule's result as JSON, and write it to ``path`` where given."""
     print(json.dumps(out, indent=1))
-    if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    if path:
+        Path(path).write_text(json.dumps(out, indent=1) + "\n")
     return out
 
 

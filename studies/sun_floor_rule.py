@@ -51,7 +51,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -65,7 +64,15 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
-from floor_rule import BAND, NOMINAL, decide, figures, load_scores, measuring_facets  # noqa: E402
+from floor_rule import (  # noqa: E402
+    BAND,
+    NOMINAL,
+    decide,
+    figures,
+    load_scores,
+    measuring_facets,
+    report,
+)
 from model_error_floor import widened  # noqa: E402
 from sun_flag_seen import SEEN_STOP63, unidentified_share  # noqa: E402
 from validate_radiance import _holds as holds  # noqa: E402
@@ -226,10 +233,7 @@ def main(argv=None) -> dict:
         out = apply_rule({n: load_scores(n, False) for n in args.set}, args.sun_floor)
         if args.second:
             out["second_test"] = second_test(out)
-    print(json.dumps(out, indent=1))
-    if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
-    return out
+    return report(out, args.json)
 
 
 if __name__ == "__main__":
