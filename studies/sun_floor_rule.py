@@ -65,16 +65,18 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
 from floor_rule import (  # noqa: E402
-    BAND,
     NOMINAL,
     decide,
     figures,
+    in_band,
     load_scores,
     measuring_facets,
+    renderer,
     report,
 )
 from model_error_floor import widened  # noqa: E402
 from sun_flag_seen import SEEN_STOP63, unidentified_share  # noqa: E402
+from sun_flag_seen import figures as cell_figures  # noqa: E402
 from validate_radiance import _holds as holds  # noqa: E402
 from validate_radiance import reported_interval  # noqa: E402
 
@@ -116,25 +118,24 @@ def candidate(entry: dict, sun_floor: float, rng: np.random.Generator) -> dict:
     return with_flag_by_width(entry)
 
 
-def _seen_rows(names=SEEN_STOP63) -> list[tuple[str, dict]]:
-    """(renderer, score) of the seen sets' scores that keep each frame's sun."""
+def _seen_scores(names=SEEN_STOP63) -> list[dict]:
+    """The seen sets' scores that keep each frame's sun."""
     out = []
     for name in names:
         try:
             scores = load_scores(name, False)
         except (FileNotFoundError, KeyError):
             continue
-        r = "mitsuba" if "mitsuba" in name else "radiance"
-        out += [(r, s) for s in scores if s["truth"] is not None and "sun_q05" in s["perez"]]
+        out += [s for s in scores if s["truth"] is not None and "sun_q05" in s["perez"]]
     return out
 
 
-def choose_sun_floor(rows=None) -> dict:
+def choose_sun_floor(scores=None) -> dict:
     """The candidate floor on the seen sets: the smallest of :data:`GRID` at
     which the flagged objects' intervals hold the truth in at least
     :data:`COVERAGE`; with each floor's coverage."""
-    rows = _seen_rows() if rows is None else rows
-    flagged = [s for _, s in rows if sun_unidentified(s["perez"])]
+    scores = _seen_scores() if scores is None else scores
+    flagged = [s for s in scores if sun_unidentified(s["perez"])]
     table = {}
     for floor in GRID:
         rng = np.random.default_rng(SEED)
@@ -150,7 +151,7 @@ def apply_rule(sets: dict[str, list[dict]], sun_floor: float = CANDIDATE_SUN_FLO
     rows = {"default": {}, "candidate": {}}
     flagged = {"default": [], "candidate": []}
     for name, scores in sets.items():
-        r = "mitsuba" if "mitsuba" in name else "radiance"
+        r = renderer(name)
         for s in scores:
             entry = s["perez"]
             pair = {"default": entry, "candidate": candidate(entry, sun_floor, rng)}
@@ -163,22 +164,12 @@ def apply_rule(sets: dict[str, list[dict]], sun_floor: float = CANDIDATE_SUN_FLO
         r: {m: figures(rows[m][r]) for m in ("default", "candidate")} for r in rows["default"]
     }
     pooled = {m: figures([x for v in rows[m].values() for x in v]) for m in rows}
-    cover = {
-        m: {
-            "n": len(v),
-            "held": int(sum(bool(holds(e, t)) for e, t, _ in v)),
-            "mae": float(np.mean([abs(e["median"] - t) for e, t, _ in v])) if v else None,
-            "median_width": float(np.median([np.ptp(reported_interval(e)) for e, _, _ in v]))
-            if v
-            else None,
-        }
-        for m, v in flagged.items()
-    }
+    cover = {m: cell_figures([(e, t) for e, t, _ in v]) for m, v in flagged.items()}
     decision = decide(pooled["default"], pooled["candidate"], by_renderer)
     met = decision.pop("met")
     cov = {m: c["held"] / c["n"] if c["n"] else None for m, c in cover.items()}
     five = cov["candidate"] is not None and (
-        BAND[0] <= cov["candidate"] <= BAND[1]
+        in_band(cov["candidate"])
         or abs(cov["candidate"] - NOMINAL) <= abs(cov["default"] - NOMINAL)
     )
     decision["(5) flagged objects' coverage in 85-97 % or no farther from 90 %"] = bool(five)
