@@ -79,6 +79,7 @@ SETS = {
     "validation_holdout25": "validation_holdout25",
     "validation_holdout26": "validation_holdout26",
     "validation_holdout27": "validation_holdout27",
+    "validation_holdout28": "validation_holdout28",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -93,6 +94,7 @@ SETS = {
     "mitsuba_holdout11": "validation_mitsuba_holdout11",
     "mitsuba_holdout12": "validation_mitsuba_holdout12",
     "mitsuba_holdout13": "validation_mitsuba_holdout13",
+    "mitsuba_holdout14": "validation_mitsuba_holdout14",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -140,6 +142,10 @@ SCORED_ELSEWHERE = {
     # holdout 24's and Mitsuba holdout 11's candidate, branch lobes-every-sky: where
     # the sky families tie, every lobe fitted under each tied sky (stacking.fit_stacked)
     "lobes-every-sky": "perez",
+    # stop 65's candidate, branch within-2se: where PSIS-LOO is unreliable, a
+    # family within 2 standard errors of the best shares the weight too
+    # (bayesgloss.sky_families.ruled_out_when_unreliable)
+    "within-2se": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -204,6 +210,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout11": ("baseline", "perez"),  # boxes; and lobes-every-sky, merged (stop 60)
     "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
+    "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -228,6 +235,10 @@ DEFAULT_METHODS = {
     "validation_holdout25": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
+    "validation_holdout28": (
+        "baseline",
+        "perez",
+    ),  # the default after stop 63; and within-2se, merged
 }
 
 
@@ -482,14 +493,35 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
 #: where the lobe families were stacked (a ``ggx-schlick`` entry);
 #: ``lobes-every-sky`` only where the sky families tied and the lobes were
 #: therefore not stacked (flagged both ``sky-family-not-identifiable`` and
-#: ``lobe-family-not-stacked``).
+#: ``lobe-family-not-stacked``); ``within-2se`` only where a sky or lobe
+#: family got no weight while more than 10 nats but at most 2 standard
+#: errors behind, or where the lobes were weighed under each tied sky
+#: (their weights under each sky are not all kept), or where the sky
+#: families' record is empty (:func:`_within_2se_acts`).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
     "in-lobe": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
     "lobes-every-sky": lambda entry: (
         {"sky-family-not-identifiable", "lobe-family-not-stacked"} <= set(entry.get("flags", []))
     ),
+    "within-2se": lambda entry: _within_2se_acts(entry),
 }
+
+
+def _within_2se_acts(entry: dict) -> bool:
+    """Whether stop 65's ``within-2se`` can answer otherwise than the
+    default whose ``perez`` entry is ``entry`` (:data:`CANDIDATE_ACTS`)."""
+    sky = entry.get("sky_families") or {}
+    families = dict(sky.get("families") or {})
+    if sky.get("equal_weights") and not families:
+        return True
+    lobes = [v for v in (entry.get("lobe_families") or {}).values() if isinstance(v, dict)]
+    if any("weight_by_sky" in v for v in lobes):
+        return True
+    rows = list(families.values()) + [v for v in lobes if "elpd_diff" in v]
+    return any(
+        r.get("weight", 1.0) == 0.0 and 10.0 < r["elpd_diff"] <= 2.0 * r["dse"] for r in rows
+    )
 
 
 def _same_as_default(path: Path, candidate: tuple | None) -> dict | None:

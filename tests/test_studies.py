@@ -248,6 +248,37 @@ def test_a_candidate_copies_the_defaults_answer_only_where_it_cannot_change_it(t
     )
 
 
+def test_within_2se_is_fitted_only_where_a_family_it_would_keep_was_left_out():
+    # stop 65's candidate keeps a family more than 10 nats behind if within
+    # 2 standard errors of the difference; the default's entry shows where
+    # that can change the weights. Holdout 27's vs13 (its ggx-schlick lobe
+    # 13.3 nats behind at 9.7 se, weight 0) is one; a family 13.3 behind at
+    # 5 se, or 8 behind (already kept), or weighed 0 by stacking while
+    # within 10 nats, is not; lobes weighed under each tied sky always are
+    acts = study_module("validate_radiance").CANDIDATE_ACTS["within-2se"]
+
+    def lobe(weight, diff, dse):
+        best = {"weight": 1 - weight, "elpd_diff": 0.0, "dse": 0.0}
+        other = {"weight": weight, "elpd_diff": diff, "dse": dse}
+        sky = {"auto": {"weight": 1.0, "elpd_diff": 0.0, "dse": 0.0}}
+        return {
+            "lobe_families": {"phong": best, "ggx-schlick": other},
+            "sky_families": {"families": sky},
+        }
+
+    assert acts(lobe(0.0, 13.3, 9.7))
+    assert not acts(lobe(0.0, 13.3, 5.0))
+    assert not acts(lobe(0.0, 8.0, 9.7))
+    assert not acts(lobe(0.2, 13.3, 9.7))
+    by_sky = lobe(0.2, 3.0, 1.0)
+    by_sky["lobe_families"]["phong"]["weight_by_sky"] = {"gensky-clear": 0.4}
+    assert acts(by_sky)
+    sky = {"sky_families": {"families": {"perez": {"weight": 0.0, "elpd_diff": 10.3, "dse": 6.0}}}}
+    assert acts(sky)  # Mitsuba holdout 13's ms14: the Perez sky left out
+    assert acts({"sky_families": {"equal_weights": True, "families": {}}})
+    assert not acts({"sky_families": {"families": {}}})
+
+
 def test_validation_family_table_reads_the_default_method():
     # sets scored with the default (stacked sky families) alone have no
     # "per-frame" entry: the table read only that one and counted 0 of 0
