@@ -844,3 +844,16 @@ def test_sun_floor_rule_reads_holdout26_and_mitsuba13_as_stop_64_decided():
         "(5) flagged objects' coverage in 85-97 % or no farther from 90 %",
         "met",
     ]
+
+
+def test_paint_forward_puts_the_model_in_the_renders_units():
+    # the repainted luminance is the model times the render's median ratio
+    # to the truth's prediction: a render 179 times the truth's prediction
+    # (Radiance's lm/W) with one entry off by 10 % repaints a model twice
+    # the truth's as 358 times it, the outlier not moving the unit
+    paint = study_module("paint_forward")
+    truth = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    y = 179.0 * truth
+    y[0, 0] *= 1.1
+    out = paint.painted_luminance(y, truth, 2.0 * truth)
+    np.testing.assert_allclose(out, 358.0 * truth)
