@@ -63,7 +63,8 @@ def paint(source: Path, out: Path, config: dict, specularity: float) -> dict:
     truth_model = forward_check.predictions(b, day, clean, checked)["convex"]
     other = dataclasses.replace(clean, specularity=specularity)
     model = forward_check.predictions(b, day, other, checked)["convex"]
-    target = painted_luminance(y[checked], truth_model, model)
+    seen = y[checked]
+    target = painted_luminance(seen, truth_model, model)
     shutil.rmtree(out, ignore_errors=True)
     shutil.copytree(source, out)
     labels = bundle_io.read_labels(out / "facets.png")
@@ -73,12 +74,11 @@ def paint(source: Path, out: Path, config: dict, specularity: float) -> dict:
         path = out / frame["file"]
         image = bundle_io.read_hdr(path).astype(np.float64)
         for j, facet in enumerate(ids):
-            seen = y[checked][j, t]
-            if np.isfinite(seen) and seen > 0:
-                image[labels == facet] *= target[j, t] / seen
+            if np.isfinite(seen[j, t]) and seen[j, t] > 0:
+                image[labels == facet] *= target[j, t] / seen[j, t]
         bundle_io.write_hdr(path, image.astype(np.float32))
     with np.errstate(divide="ignore", invalid="ignore"):
-        spread = float(np.nanstd(np.log(y[checked] / truth_model)))
+        spread = float(np.nanstd(np.log(seen / truth_model)))
     return {"facets": int(checked.sum()), "render_sd_about_truth": spread}
 
 
@@ -89,8 +89,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--specularity", type=float, required=True)
     ap.add_argument("--out", required=True, help="the repainted bundle's folder")
     args = ap.parse_args(argv)
-    configs = json.loads((HERE / "results" / f"{args.set}_configs.json").read_text())
-    entry = configs["sequences"][args.which]
+    path = HERE / "results" / f"{args.set}_configs.json"
+    if not path.exists():
+        raise SystemExit(f"paint_forward: {path}: no drawn configs for set {args.set!r}")
+    sequences = json.loads(path.read_text())["sequences"]
+    if not 0 <= args.which < len(sequences):
+        raise SystemExit(
+            f"paint_forward: {path}: --which {args.which}: the set has sequences "
+            f"0-{len(sequences) - 1}"
+        )
+    entry = sequences[args.which]
     bundles = HERE / "out" / args.set / "bundles"
     source = bundles / f"{entry['name']}-{entry['key']}"
     if not (source / "sequence.json").exists():

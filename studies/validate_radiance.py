@@ -235,10 +235,7 @@ DEFAULT_METHODS = {
     "validation_holdout25": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
-    "validation_holdout28": (
-        "baseline",
-        "perez",
-    ),  # the default after stop 63; and within-2se, merged
+    "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
 }
 
 
@@ -482,6 +479,31 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
     return out
 
 
+#: The standard errors of the difference within which ``within-2se`` keeps
+#: a family (its branch's ``sky_families.UNRELIABLE_NEAR_DSE``).
+WITHIN_2SE_DSE = 2.0
+
+
+def _within_2se_acts(entry: dict) -> bool:
+    """Whether stop 65's ``within-2se`` can answer otherwise than the
+    default whose ``perez`` entry is ``entry`` (:data:`CANDIDATE_ACTS`)."""
+    from bayesgloss.sky_families import UNRELIABLE_NEAR_NATS
+
+    sky = entry.get("sky_families") or {}
+    families = dict(sky.get("families") or {})
+    if sky.get("equal_weights") and not families:
+        return True
+    lobes = [v for v in (entry.get("lobe_families") or {}).values() if isinstance(v, dict)]
+    if any("weight_by_sky" in v for v in lobes):
+        return True
+    rows = list(families.values()) + [v for v in lobes if "elpd_diff" in v]
+    return any(
+        r.get("weight", 1.0) == 0.0
+        and UNRELIABLE_NEAR_NATS < r["elpd_diff"] <= WITHIN_2SE_DSE * r["dse"]
+        for r in rows
+    )
+
+
 #: Where a candidate scored on its own commit (as ``perez``) can answer
 #: otherwise than the default: a test of the default's ``perez`` entry of the
 #: same bundle. Where it is false the candidate runs the default's fits
@@ -504,24 +526,8 @@ CANDIDATE_ACTS = {
     "lobes-every-sky": lambda entry: (
         {"sky-family-not-identifiable", "lobe-family-not-stacked"} <= set(entry.get("flags", []))
     ),
-    "within-2se": lambda entry: _within_2se_acts(entry),
+    "within-2se": _within_2se_acts,
 }
-
-
-def _within_2se_acts(entry: dict) -> bool:
-    """Whether stop 65's ``within-2se`` can answer otherwise than the
-    default whose ``perez`` entry is ``entry`` (:data:`CANDIDATE_ACTS`)."""
-    sky = entry.get("sky_families") or {}
-    families = dict(sky.get("families") or {})
-    if sky.get("equal_weights") and not families:
-        return True
-    lobes = [v for v in (entry.get("lobe_families") or {}).values() if isinstance(v, dict)]
-    if any("weight_by_sky" in v for v in lobes):
-        return True
-    rows = list(families.values()) + [v for v in lobes if "elpd_diff" in v]
-    return any(
-        r.get("weight", 1.0) == 0.0 and 10.0 < r["elpd_diff"] <= 2.0 * r["dse"] for r in rows
-    )
 
 
 def _same_as_default(path: Path, candidate: tuple | None) -> dict | None:

@@ -857,3 +857,13 @@ def test_paint_forward_puts_the_model_in_the_renders_units():
     y[0, 0] *= 1.1
     out = paint.painted_luminance(y, truth, 2.0 * truth)
     np.testing.assert_allclose(out, 358.0 * truth)
+
+
+def test_paint_forward_names_the_file_and_the_bad_index():
+    # one line naming the configs file and what is wrong, not an IndexError
+    paint = study_module("paint_forward")
+    with pytest.raises(SystemExit, match=r"validation_holdout27_configs\.json: --which 99: .*0-23"):
+        paint.main(["--set", "validation_holdout27", "--which", "99",
+                    "--specularity", "0.1", "--out", "unused"])  # fmt: skip
+    with pytest.raises(SystemExit, match=r"nosuch_configs\.json: no drawn configs"):
+        paint.main(["--set", "nosuch", "--which", "0", "--specularity", "0.1", "--out", "unused"])
