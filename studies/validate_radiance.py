@@ -144,7 +144,7 @@ SCORED_ELSEWHERE = {
     "lobes-every-sky": "perez",
     # stop 65's candidate, branch within-2se: where PSIS-LOO is unreliable, a
     # family within 2 standard errors of the best shares the weight too
-    # (bayesgloss.sky_families.ruled_out_when_unreliable)
+    # (bayesgloss.sky_families.equal_when_unreliable, UNRELIABLE_NEAR_DSE)
     "within-2se": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
