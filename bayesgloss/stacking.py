@@ -45,8 +45,8 @@ carries (stop 35: a box's answer narrowed to one sky's fit while flagged
 - ``"every-near-sky"`` (:func:`_stacked_under_near_skies`): every choice is
   fitted under each sky family that shares the weight, the choices are
   weighed within each sky as elsewhere (with the same guard: where their
-  PSIS-LOO is unreliable too, those within
-  :data:`~bayesgloss.sky_families.UNRELIABLE_NEAR_NATS` of the best share
+  PSIS-LOO is unreliable too, those not behind beyond doubt
+  (:func:`~bayesgloss.sky_families.equal_when_unreliable`) share
   the weight evenly), and the answer is the mixture over (sky, choice)
   with weight w_sky w_choice|sky: the sky's uncertainty and the part's
   both carried. It costs (choices - 1) fits per near sky, cheap on the few

@@ -142,9 +142,10 @@ SCORED_ELSEWHERE = {
     # holdout 24's and Mitsuba holdout 11's candidate, branch lobes-every-sky: where
     # the sky families tie, every lobe fitted under each tied sky (stacking.fit_stacked)
     "lobes-every-sky": "perez",
-    # stop 65's candidate, branch within-2se: where PSIS-LOO is unreliable, a
-    # family within 2 standard errors of the best shares the weight too
-    # (bayesgloss.sky_families.equal_when_unreliable, UNRELIABLE_NEAR_DSE)
+    # stop 65's candidate, branch within-2se, the default since stop 66: where
+    # PSIS-LOO is unreliable, a family within 2 standard errors of the best
+    # shares the weight too (bayesgloss.sky_families.equal_when_unreliable,
+    # UNRELIABLE_NEAR_DSE)
     "within-2se": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
