@@ -147,6 +147,9 @@ SCORED_ELSEWHERE = {
     # shares the weight too (bayesgloss.sky_families.equal_when_unreliable,
     # UNRELIABLE_NEAR_DSE)
     "within-2se": "perez",
+    # stop 66's probe on the seen pool, branch sunless-lobes: the lobe families
+    # stacked on sunless days too (lobe_families' sunless_default off)
+    "sunless-lobes": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -520,7 +523,9 @@ def _within_2se_acts(entry: dict) -> bool:
 #: family got no weight while more than 10 nats but at most 2 standard
 #: errors behind, or where the lobes were weighed under each tied sky
 #: (their weights under each sky are not all kept), or where the sky
-#: families' record is empty (:func:`_within_2se_acts`).
+#: families' record is empty (:func:`_within_2se_acts`); ``sunless-lobes``
+#: only where the lobes were not stacked (flagged ``lobe-family-not-stacked``:
+#: the day's sky an overcast one).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
     "in-lobe": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
@@ -528,6 +533,7 @@ CANDIDATE_ACTS = {
         {"sky-family-not-identifiable", "lobe-family-not-stacked"} <= set(entry.get("flags", []))
     ),
     "within-2se": _within_2se_acts,
+    "sunless-lobes": lambda entry: "lobe-family-not-stacked" in entry.get("flags", []),
 }
 
 

@@ -279,6 +279,19 @@ def test_within_2se_is_fitted_only_where_a_family_it_would_keep_was_left_out():
     assert not acts({"sky_families": {"families": {}}})
 
 
+def test_sunless_lobes_is_fitted_only_where_the_lobes_were_not_stacked():
+    # stop 66's probe stacks the lobe families on sunless days too; the
+    # default's entry shows where it left them out (Phong alone, flagged
+    # lobe-family-not-stacked: Mitsuba holdout 14's ms16, whose four lobes
+    # predicted alike and read 0.10 to 0.94); a sun-lit entry whose lobes
+    # were stacked, or a sunless one flagged otherwise, is copied
+    acts = study_module("validate_radiance").CANDIDATE_ACTS["sunless-lobes"]
+    assert acts({"flags": ["sun-not-identifiable", "lobe-family-not-stacked"]})
+    assert not acts({"flags": ["sun-not-identifiable", "sky-family-not-identifiable"]})
+    assert not acts({"flags": []})
+    assert not acts({})
+
+
 def test_validation_family_table_reads_the_default_method():
     # sets scored with the default (stacked sky families) alone have no
     # "per-frame" entry: the table read only that one and counted 0 of 0
