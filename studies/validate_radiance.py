@@ -607,6 +607,23 @@ def merge_scores(scores: Path, other: Path, method: str) -> int:
     return copied
 
 
+def unpack_scores(results: Path, scores: Path) -> int:
+    """Write each sequence of a set's committed results (``results``, a
+    ``validation_<set>.json``) into the score cache ``scores``, one
+    ``<bundle>.json`` a bundle, as scoring wrote it there, leaving a file
+    already there as it is; the number written. A new machine has the
+    results but not the cache, which ``--candidate`` reads the default's
+    scores from."""
+    scores.mkdir(parents=True, exist_ok=True)
+    written = 0
+    for entry in json.loads(results.read_text())["sequences"]:
+        file = scores / f"{entry['bundle']}.json"
+        if not file.exists():
+            file.write_text(json.dumps(entry, indent=1))
+            written += 1
+    return written
+
+
 def _holds(entry: dict, truth: float) -> bool:
     """Whether the interval bayesgloss reports (:mod:`bayesgloss.intervals`;
     quantiles in scores cached before it had one) holds the truth."""
@@ -893,6 +910,12 @@ def main(argv=None) -> None:
         "the default's answer from its score FOLDER where the candidate cannot change it",
     )
     ap.add_argument(
+        "--unpack",
+        action="store_true",
+        help="fit nothing: write the set's committed scores into its score folder, one file "
+        "a bundle (for --candidate on a machine that has the results but not the folder)",
+    )
+    ap.add_argument(
         "--summary-only",
         action="store_true",
         help="fit nothing: rebuild the tables and figures from the set's committed scores "
@@ -919,6 +942,13 @@ def main(argv=None) -> None:
         print(
             f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'"
         )
+        return
+    if args.unpack:
+        results = RESULTS / f"{SETS[args.set]}.json"
+        if not results.exists():
+            raise SystemExit(f"validate_radiance: --unpack: {results}: no committed scores")
+        scores = HERE / "out" / args.set / "scores"
+        print(f"{unpack_scores(results, scores)} bundles' scores written to {scores}")
         return
     candidate = None
     if args.candidate:

@@ -292,6 +292,26 @@ def test_sunless_lobes_is_fitted_only_where_the_lobes_were_not_stacked():
     assert not acts({})
 
 
+def test_unpack_scores_writes_each_bundle_once_and_keeps_the_cache(tmp_path):
+    # a new machine has a set's committed results but not its score folder,
+    # from which --candidate reads the default's answers: each sequence is
+    # written as <bundle>.json, as scoring wrote it, and a cached file (here
+    # one holding a second method) is not overwritten
+    validate = study_module("validate_radiance")
+    a = {"bundle": "vs00-a", "truth": 0.1, "perez": {"median": 0.12}}
+    b = {"bundle": "vs01-b", "truth": 0.5, "perez": {"median": 0.40}}
+    results = tmp_path / "validation_x.json"
+    results.write_text(json.dumps({"sequences": [a, b]}))
+    scores = tmp_path / "scores"
+    scores.mkdir()
+    cached = {**b, "within-2se": {"median": 0.41}}
+    (scores / "vs01-b.json").write_text(json.dumps(cached))
+    assert validate.unpack_scores(results, scores) == 1
+    assert json.loads((scores / "vs00-a.json").read_text()) == a
+    assert json.loads((scores / "vs01-b.json").read_text()) == cached
+    assert validate.unpack_scores(results, scores) == 0
+
+
 def test_validation_family_table_reads_the_default_method():
     # sets scored with the default (stacked sky families) alone have no
     # "per-frame" entry: the table read only that one and counted 0 of 0
