@@ -54,7 +54,9 @@ frame's sun and sky rest on 1-3 entries, leaving one out moves them, and
 the share runs to 0.4-0.9 (on 1-3 facet objects of the seen holdouts the
 reported interval held 9 of 13 there, against 50 of 52 sequences at or
 below 0.1). Above :data:`UNRELIABLE_LOO_SHARE` the families within
-:data:`UNRELIABLE_NEAR_NATS` of the best are averaged with equal weights
+:data:`UNRELIABLE_NEAR_NATS` of the best, or within
+:data:`UNRELIABLE_NEAR_DSE` standard errors of the difference, are
+averaged with equal weights
 (:func:`equal_when_unreliable`) and the object flagged
 ``sky-family-not-identifiable``; ``unreliable_loo="stack"`` keeps the
 stacking weights and flags it ``loo-unreliable``. The default since stop
@@ -577,8 +579,9 @@ def _fit_screened(names, args, seed, options, progress, jobs, unreliable_loo):
     weights would be made equal (``unreliable_loo="equal"`` and
     :func:`loo_unreliable`): the guard then weighs every fit by its full
     run's elpd_loo (:func:`equal_when_unreliable`), so every fit runs in
-    full, even those it will give no weight (more than
-    :data:`UNRELIABLE_NEAR_NATS` behind the best).
+    full, even those it will give no weight (behind the best by more
+    than :data:`UNRELIABLE_NEAR_NATS` and :data:`UNRELIABLE_NEAR_DSE`
+    standard errors, :func:`behind_beyond_doubt`).
     ``options["screen_families"] = False`` runs every family in full.
 
     Returns
