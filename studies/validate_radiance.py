@@ -483,15 +483,16 @@ def score_bundle(path: str, max_sweeps: int, methods=METHODS, out: dict | None =
     return out
 
 
-#: The standard errors of the difference within which ``within-2se`` keeps
-#: a family (its branch's ``sky_families.UNRELIABLE_NEAR_DSE``).
-WITHIN_2SE_DSE = 2.0
-
-
 def _within_2se_acts(entry: dict) -> bool:
     """Whether stop 65's ``within-2se`` can answer otherwise than the
-    default whose ``perez`` entry is ``entry`` (:data:`CANDIDATE_ACTS`)."""
-    from bayesgloss.sky_families import UNRELIABLE_NEAR_NATS
+    default whose ``perez`` entry is ``entry`` (:data:`CANDIDATE_ACTS`):
+    a family left out more than 10 nats behind but not beyond doubt by
+    ``sky_families``' margins (on main since stop 66)."""
+    from bayesgloss.sky_families import (
+        UNRELIABLE_NEAR_DSE,
+        UNRELIABLE_NEAR_NATS,
+        behind_beyond_doubt,
+    )
 
     sky = entry.get("sky_families") or {}
     families = dict(sky.get("families") or {})
@@ -503,7 +504,8 @@ def _within_2se_acts(entry: dict) -> bool:
     rows = list(families.values()) + [v for v in lobes if "elpd_diff" in v]
     return any(
         r.get("weight", 1.0) == 0.0
-        and UNRELIABLE_NEAR_NATS < r["elpd_diff"] <= WITHIN_2SE_DSE * r["dse"]
+        and r["elpd_diff"] > UNRELIABLE_NEAR_NATS
+        and not behind_beyond_doubt(r, UNRELIABLE_NEAR_NATS, UNRELIABLE_NEAR_DSE)
         for r in rows
     )
 
@@ -943,8 +945,8 @@ def main(argv=None) -> None:
             f"{n} bundles' '{SCORED_ELSEWHERE[method]}' scores from {folder} copied as '{method}'"
         )
         return
+    results = RESULTS / f"{SETS[args.set]}.json"
     if args.unpack:
-        results = RESULTS / f"{SETS[args.set]}.json"
         if not results.exists():
             raise SystemExit(f"validate_radiance: --unpack: {results}: no committed scores")
         scores = HERE / "out" / args.set / "scores"
@@ -967,7 +969,6 @@ def main(argv=None) -> None:
             f"validate_radiance: {sorted(elsewhere)} are scored on another commit; use --merge"
         )
     bundles = HERE / "out" / args.set / "bundles"
-    results = RESULTS / f"{SETS[args.set]}.json"
     committed = {}
     if results.exists():
         saved = json.loads(results.read_text())
