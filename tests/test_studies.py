@@ -900,3 +900,21 @@ def test_paint_forward_names_the_file_and_the_bad_index():
                     "--specularity", "0.1", "--out", "unused"])  # fmt: skip
     with pytest.raises(SystemExit, match=r"nosuch_configs\.json: no drawn configs"):
         paint.main(["--set", "nosuch", "--which", "0", "--specularity", "0.1", "--out", "unused"])
+
+
+def test_probe_roughness_cap_sets_the_exponent_bound():
+    """The probe's cap at roughness 0.5 starts the prior of log n at log 6
+    (n = 2 / alpha^2 - 2); in a fresh process, since it changes the class's
+    default for the process."""
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]);"
+        "import probe_roughness_cap as p;"
+        "from bayesgloss import likelihood as lk;"
+        "print(p.cap_exponent_prior(0.5)[0], lk.Priors().log_n[0], lk.Priors().log_n[1])"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(STUDIES)], capture_output=True, text=True, check=True
+    )
+    capped, default_now, upper = (float(x) for x in out.stdout.split())
+    assert capped == pytest.approx(np.log(6.0)) and default_now == capped
+    assert upper == pytest.approx(np.log(1e4))
