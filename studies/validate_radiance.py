@@ -150,6 +150,9 @@ SCORED_ELSEWHERE = {
     # stop 66's probe on the seen pool, branch sunless-lobes: the lobe families
     # stacked on sunless days too (lobe_families' sunless_default off)
     "sunless-lobes": "perez",
+    # stop 67's probe on the seen pool: sunless-lobes with every lobe's
+    # roughness at most 0.5 (the exponent prior's n >= 6)
+    "sunless-lobes-cap": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -536,6 +539,7 @@ CANDIDATE_ACTS = {
     ),
     "within-2se": _within_2se_acts,
     "sunless-lobes": lambda entry: "lobe-family-not-stacked" in entry.get("flags", []),
+    "sunless-lobes-cap": lambda entry: "lobe-family-not-stacked" in entry.get("flags", []),
 }
 
 
