@@ -513,6 +513,13 @@ def _within_2se_acts(entry: dict) -> bool:
     )
 
 
+def _lobes_not_stacked(entry: dict) -> bool:
+    """The default answered with Phong alone because the day's most-weighted
+    sky was an overcast one (flagged ``lobe-family-not-stacked``): where
+    the sunless-lobes probes act."""
+    return "lobe-family-not-stacked" in entry.get("flags", [])
+
+
 #: Where a candidate scored on its own commit (as ``perez``) can answer
 #: otherwise than the default: a test of the default's ``perez`` entry of the
 #: same bundle. Where it is false the candidate runs the default's fits
@@ -529,8 +536,8 @@ def _within_2se_acts(entry: dict) -> bool:
 #: errors behind, or where the lobes were weighed under each tied sky
 #: (their weights under each sky are not all kept), or where the sky
 #: families' record is empty (:func:`_within_2se_acts`); ``sunless-lobes``
-#: only where the lobes were not stacked (flagged ``lobe-family-not-stacked``:
-#: the day's sky an overcast one).
+#: and ``sunless-lobes-cap`` only where the lobes were not stacked
+#: (:func:`_lobes_not_stacked`).
 CANDIDATE_ACTS = {
     "within-10": lambda entry: "sky-family-not-identifiable" in entry.get("flags", []),
     "in-lobe": lambda entry: "ggx-schlick" in (entry.get("lobe_families") or {}),
@@ -538,8 +545,8 @@ CANDIDATE_ACTS = {
         {"sky-family-not-identifiable", "lobe-family-not-stacked"} <= set(entry.get("flags", []))
     ),
     "within-2se": _within_2se_acts,
-    "sunless-lobes": lambda entry: "lobe-family-not-stacked" in entry.get("flags", []),
-    "sunless-lobes-cap": lambda entry: "lobe-family-not-stacked" in entry.get("flags", []),
+    "sunless-lobes": _lobes_not_stacked,
+    "sunless-lobes-cap": _lobes_not_stacked,
 }
 
 

@@ -918,3 +918,6 @@ def test_probe_roughness_cap_sets_the_exponent_bound():
     capped, default_now, upper = (float(x) for x in out.stdout.split())
     assert capped == pytest.approx(np.log(6.0)) and default_now == capped
     assert upper == pytest.approx(np.log(1e4))
+    from bayesgloss import lobes
+
+    assert lobes.roughness_of_exponent(np.exp(capped)) == pytest.approx(0.5)
