@@ -80,6 +80,7 @@ SETS = {
     "validation_holdout26": "validation_holdout26",
     "validation_holdout27": "validation_holdout27",
     "validation_holdout28": "validation_holdout28",
+    "validation_holdout29": "validation_holdout29",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -95,6 +96,7 @@ SETS = {
     "mitsuba_holdout12": "validation_mitsuba_holdout12",
     "mitsuba_holdout13": "validation_mitsuba_holdout13",
     "mitsuba_holdout14": "validation_mitsuba_holdout14",
+    "mitsuba_holdout15": "validation_mitsuba_holdout15",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -218,6 +220,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
     "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
+    "mitsuba_holdout15": ("baseline", "perez"),  # sunless days; sunless-lobes-cap judged
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -243,6 +246,7 @@ DEFAULT_METHODS = {
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
     "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
+    "validation_holdout29": ("baseline", "perez"),  # sunless days; sunless-lobes-cap judged
 }
 
 
