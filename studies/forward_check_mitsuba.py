@@ -30,19 +30,22 @@ the GGX lobe with Smith shadowing, :mod:`bayesgloss.lobes`):
 ``in-lobe``
     the rise inside the lobe, :func:`bayesgloss.fresnel.fresnel_parts_in_lobe`
     with the smooth coating's transmission 1 - S(c) (branch
-    ``schlick-in-lobe``, holdout 18's second candidate);
-``rough-transmission``
-    ``in-lobe`` with the rough coating's transmission 1 - E^S(c; alpha)
-    at the view and the sun (:func:`bayesgloss.lobes.ggx_schlick_rise_albedo`).
+    ``schlick-in-lobe``, holdout 18's second candidate; the default's
+    ``ggx-schlick`` since stop 55).
 
-Run with the code of a commit that has all four (branch
-``rough-transmission``) on ``PYTHONPATH``::
+Beside the spread at the truth, :func:`gamma_scan` finds the gamma whose
+prediction leaves the least spread (the exposure free, the sky and its
+brightness and the material's albedo and lobe the truth's): what a fit
+told the light would read with no noise. ``--sequences SET/NAME ...``
+checks other seen sequences (stop 68: Mitsuba's plastic boxes).
 
-    PYTHONPATH=<worktree> python studies/forward_check_mitsuba.py [--threads 2]
+    python studies/forward_check_mitsuba.py [--threads 2] [--sequences SET/NAME ...] [--json FILE]
 
 Renders go to ``studies/out/forward_check_mitsuba/bundles`` (cached),
 answers to ``studies/results/forward_check_mitsuba.json``. A development
-tool on seen sequences: it decides nothing.
+tool on seen sequences: it decides nothing. (Stop 52's fourth model, the
+rough coating's transmission, was on a branch never merged; the script
+computes the three models main has.)
 """
 
 from __future__ import annotations
@@ -84,7 +87,11 @@ SEQUENCES = (
 )
 #: The exponent of a smooth coating: the exponent table's end (alpha 0.014).
 SMOOTH_EXPONENT = 1.0e4
-MODELS = ("none", "view-rise", "in-lobe", "rough-transmission")
+#: The forward models compared; ``rough-transmission`` (stop 52's branch,
+#: not merged) is no longer computed.
+MODELS = ("none", "view-rise", "in-lobe")
+#: gamma of the scan (:func:`gamma_scan`).
+GAMMA_GRID = np.linspace(0.0, 1.0, 101)
 
 
 def clean_sequence(set_name: str, name: str) -> mr.MitsubaSequence:
@@ -95,17 +102,22 @@ def clean_sequence(set_name: str, name: str) -> mr.MitsubaSequence:
     return mr.MitsubaSequence(clean, item.material, item.spp, item.seed)
 
 
-def model_predictions(b, checked, sequence: mr.MitsubaSequence) -> dict:
-    """Each model's radiance of the ``checked`` facets at the truth, (F, T)."""
-    truth = b.truth
+def true_material(b, sequence: mr.MitsubaSequence) -> tuple[float, float, float]:
+    """The material in the model's terms from the bundle's truth: albedo A =
+    R_s + R_d and gamma = R_s / A at normal incidence (luminance), and the
+    Phong-equivalent exponent of its alpha (a smooth one at the table's end)."""
     y = np.asarray(mr._WEIGHTS)
-    r_s, r_d = (
-        float(np.asarray(truth["albedo_specular"]) @ y),
-        float(np.asarray(truth["albedo_diffuse"]) @ y),
-    )
-    albedo, gamma = r_s + r_d, r_s / (r_s + r_d)
+    r_s = float(np.asarray(b.truth["albedo_specular"]) @ y)
+    r_d = float(np.asarray(b.truth["albedo_diffuse"]) @ y)
     alpha = sequence.material.alpha
     n = SMOOTH_EXPONENT if alpha == 0 else 2.0 / alpha**2 - 2.0
+    return r_s + r_d, r_s / (r_s + r_d), n
+
+
+def true_bases(b, checked, sequence: mr.MitsubaSequence, n: float):
+    """The GGX bases (with Schlick's rise in the lobe) of the ``checked``
+    facets at exponent ``n`` under the true sky, the convex ground shadow
+    averaged over each facet's points."""
     day = mr.frame_skies(sequence.config)
     points, owner = shadow_points(b.facets, b.camera_position, which=checked)
     bases = il.illumination_bases(
@@ -113,69 +125,110 @@ def model_predictions(b, checked, sequence: mr.MitsubaSequence) -> dict:
         day,
         exponents=[n],
         lobe_family="ggx",
-        fresnel="schlick",
+        fresnel="schlick-lobe",
         ground="plane",
         ground_reflectance=sequence.config.ground_reflectance,
     )
-    bases = averaged_bases(bases, owner, int(checked.sum()))
+    return averaged_bases(bases, owner, int(checked.sum()))
+
+
+def model_predictions(bases, albedo: float, gamma) -> dict:
+    """Each model's radiance of the facets for ``gamma`` (a scalar, or an
+    array (G,) of them), (G, F, T), the Fresnel strength k = 1."""
+    gamma = np.atleast_1d(np.asarray(gamma, float))[:, None, None, None]  # (G, 1, 1, 1)
     terms = bases.fresnel
     log_a = np.log(albedo)
     out = {m: 0.0 for m in MODELS}
-    for p in (0, 1):  # the sun, the sky
+    for p in (0, 1):  # the sun, the sky (one sky model: source 2 is its copy)
         d = bases.diffuse[p][:, None, :]  # (F, 1, T)
         g = bases.glossy[p][:, :1, :]
-        g_s = bases.glossy_rise[p][:, :1, :]
+        g_s = terms.glossy_rise[p][:, :1, :]
         sun = terms.sun_direct if p == 0 else None
-        sun_rough = terms.sun_direct_nodes[:, 0] if p == 0 else None
         base = (1 - gamma) * d + gamma * g
         out["none"] = out["none"] + albedo * base
         out["view-rise"] = out["view-rise"] + albedo * fr.fresnel_parts(
             base, g, 1.0, log_a, terms.view, sun, gamma
         )
         out["in-lobe"] = out["in-lobe"] + albedo * fr.fresnel_parts_in_lobe(
-            d, g, g_s, 1.0, log_a, terms.view, sun, gamma
+            d, g, g_s, 1.0, log_a, terms.view, gamma, sun
         )
-        out["rough-transmission"] = out["rough-transmission"] + albedo * fr.fresnel_parts_in_lobe(
-            d, g, g_s, 1.0, log_a, terms.view_nodes[:, 0], sun_rough, gamma
-        )
-    return {m: v[:, 0, :] for m, v in out.items()}
+    return {m: v[:, :, 0, :] for m, v in out.items()}
+
+
+def gamma_scan(y, bases, albedo: float) -> dict:
+    """Per model, the gamma whose prediction leaves the least spread of log
+    (y / model) about one common value (the exposure, free in every fit):
+    what a fit told the true sky, its brightness and the material's
+    albedo and lobe would read with no noise. Its spread beside it."""
+    out = {}
+    for m, pred in model_predictions(bases, albedo, GAMMA_GRID).items():
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.log(y[None] / pred)
+        r = np.where(np.isfinite(r), r, np.nan)
+        sd = np.nanstd(r.reshape(len(GAMMA_GRID), -1), axis=1)
+        best = int(np.nanargmin(sd))
+        out[m] = {"gamma": float(GAMMA_GRID[best]), "object_sd": float(sd[best])}
+    return out
 
 
 def check(path: Path, sequence: mr.MitsubaSequence) -> dict:
-    """One clean render against each model of :func:`model_predictions`."""
+    """One clean render against each model: the spread at the truth
+    (``forward_check.spreads``) and the gamma scan."""
     b = bundle_io.read_bundle(path)
     y, checked, _ = forward_check.checked_entries(b)
+    albedo, gamma, n = true_material(b, sequence)
     out = {
         "name": sequence.config.name.removesuffix("-clean"),
         "kind": sequence.material.kind,
+        "shape": sequence.config.shape,
         "alpha": sequence.material.alpha,
         "gloss": b.truth["gloss"],
         "sky": sequence.config.sky,
         "facets": int(checked.sum()),
+        "normal_z": np.asarray(b.facets.normal)[checked, 2].round(3).tolist(),
     }
     if checked.any():
-        for m, pred in model_predictions(b, checked, sequence).items():
-            out[m] = forward_check.spreads(y[checked], pred)
+        bases = true_bases(b, checked, sequence, n)
+        at_truth = model_predictions(bases, albedo, gamma)
+        for m in MODELS:
+            out[m] = forward_check.spreads(y[checked], at_truth[m][0])
+        out["scan"] = gamma_scan(y[checked], bases, albedo)
     return out
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument(
+        "--sequences",
+        nargs="*",
+        default=None,
+        metavar="SET/NAME",
+        help="sequences to check, e.g. mitsuba_holdout14/ms15-smooth-plastic "
+        "(default: the seen many-facet plastics of SEQUENCES)",
+    )
+    ap.add_argument("--json", type=Path, default=RESULT)
     args = ap.parse_args(argv)
+    chosen = [tuple(s.split("/", 1)) for s in args.sequences] if args.sequences else SEQUENCES
     rows = []
-    for set_name, name in SEQUENCES:
+    for set_name, name in chosen:
         seq = clean_sequence(set_name, name)
         path = mr.render_bundles([seq], CACHE / set_name, threads=args.threads, progress=False)[0]
         r = check(Path(path), seq)
         r["set"] = set_name
         rows.append(r)
-        cells = " ".join(f"{m} {r[m]['object_sd']:.3f}" for m in MODELS if m in r)
+        cells = " ".join(
+            f"{m} {r[m]['object_sd']:.3f} (best gamma {r['scan'][m]['gamma']:.2f}, "
+            f"{r['scan'][m]['object_sd']:.3f})"
+            for m in MODELS
+            if m in r
+        )
         print(
-            f"{set_name}/{r['name']:22s} {r['kind']:12s} F={r['facets']:3d} object sd: {cells}",
+            f"{set_name}/{r['name']:22s} {r['shape']:9s} gamma {r['gloss']:.3f} "
+            f"F={r['facets']:3d} object sd at the truth: {cells}",
             flush=True,
         )
-        RESULT.write_text(json.dumps({"sequences": rows}, indent=1) + "\n")
+        args.json.write_text(json.dumps({"sequences": rows}, indent=1) + "\n")
     for m in MODELS:
         sd = [r[m]["object_sd"] for r in rows if m in r]
         print(f"{m}: median object sd {np.median(sd):.3f} over {len(sd)}")

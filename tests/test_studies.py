@@ -921,3 +921,26 @@ def test_probe_roughness_cap_sets_the_exponent_bound():
     from bayesgloss import lobes
 
     assert lobes.roughness_of_exponent(np.exp(capped)) == pytest.approx(0.5)
+
+
+def test_forward_check_mitsuba_scan_finds_the_gamma_that_made_the_curves():
+    # studies/forward_check_mitsuba.gamma_scan: curves made by the in-lobe
+    # coating model at gamma 0.30 (times an unknown exposure) are fitted best,
+    # with no spread left, by that model at 0.30 on the scan's 0.01 grid; the
+    # model without Fresnel reads them otherwise and leaves a spread (a scan
+    # that ignored the model, or the exposure, would not give both).
+    from conftest import paper_three_skies_bases, study_script
+
+    study, _ = study_script("forward_check_mitsuba")
+    bases, up, _ = paper_three_skies_bases(
+        exponents=[300.0], lobe_family="ggx", fresnel="schlick-lobe"
+    )
+    albedo = 0.4
+    y = 7.5 * study.model_predictions(bases, albedo, 0.3)["in-lobe"][0]
+    y = y[:, up]
+    bases = bases.take(frames=up)
+    scan = study.gamma_scan(y, bases, albedo)
+    assert scan["in-lobe"]["gamma"] == pytest.approx(0.30)
+    assert scan["in-lobe"]["object_sd"] < 1e-9
+    assert abs(scan["none"]["gamma"] - 0.30) >= 0.02
+    assert scan["none"]["object_sd"] > 1e-3
