@@ -157,15 +157,13 @@ def model_predictions(bases, albedo: float, gamma) -> dict:
 
 def gamma_scan(y, bases, albedo: float) -> dict:
     """Per model, the gamma whose prediction leaves the least spread of log
-    (y / model) about one common value (the exposure, free in every fit):
+    (y / model) about one common value (``forward_check.spreads``' object
+    sd, as at the truth; the exposure, free in every fit):
     what a fit told the true sky, its brightness and the material's
     albedo and lobe would read with no noise. Its spread beside it."""
     out = {}
     for m, pred in model_predictions(bases, albedo, GAMMA_GRID).items():
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.log(y[None] / pred)
-        r = np.where(np.isfinite(r), r, np.nan)
-        sd = np.nanstd(r.reshape(len(GAMMA_GRID), -1), axis=1)
+        sd = np.array([forward_check.spreads(y, p)["object_sd"] for p in pred])
         best = int(np.nanargmin(sd))
         out[m] = {"gamma": float(GAMMA_GRID[best]), "object_sd": float(sd[best])}
     return out

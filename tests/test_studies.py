@@ -935,10 +935,8 @@ def test_forward_check_mitsuba_scan_finds_the_gamma_that_made_the_curves():
     bases, up, _ = paper_three_skies_bases(
         exponents=[300.0], lobe_family="ggx", fresnel="schlick-lobe"
     )
-    albedo = 0.4
+    bases, albedo = bases.take(frames=up), 0.4
     y = 7.5 * study.model_predictions(bases, albedo, 0.3)["in-lobe"][0]
-    y = y[:, up]
-    bases = bases.take(frames=up)
     scan = study.gamma_scan(y, bases, albedo)
     assert scan["in-lobe"]["gamma"] == pytest.approx(0.30)
     assert scan["in-lobe"]["object_sd"] < 1e-9
