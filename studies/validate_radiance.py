@@ -224,7 +224,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
     "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
-    "mitsuba_holdout15": ("baseline", "perez"),  # sunless days; sunless-lobe-error merged (69)
+    "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error scored (69)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -250,7 +250,7 @@ DEFAULT_METHODS = {
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
     "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
-    "validation_holdout29": ("baseline", "perez"),  # sunless days; sunless-lobe-error merged (69)
+    "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error scored (69)
 }
 
 
