@@ -48,7 +48,9 @@ object's draws with the error are ``gamma_material`` in the InferenceData.
 
 Flags of the summary: a facet ``not-converged``, ``gloss-not-identifiable``
 (the model's own 90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`:
-what the data tell, the model's error aside),
+what the data tell, the model's error aside; for the object also where,
+on a sunless day answered by Phong alone, the lobe families' stack-weighted
+mixture is that wide: ``lobe_mixture_gamma``, :data:`bayesgloss.lobe_families.SUNLESS_SPREAD`),
 ``mostly-saturated`` (more than half its usable entries are lower bounds),
 or, left out, ``too-few-frames`` or ``saturated`` (too few measured
 entries); the object the same, ``mostly-saturated`` over the facets used.
@@ -63,6 +65,7 @@ entries); the object the same, ``mostly-saturated`` over the facets used.
 from __future__ import annotations
 
 import functools
+import json
 from pathlib import Path
 
 import numpy as np
@@ -463,7 +466,12 @@ def _summarise(
     mostly_saturated = censored[keep].sum(1) > 0.5 * usable[keep].sum(1)
     # the model's error of the material's gloss (bayesgloss.model_error), from
     # the facets' disagreement and the floor no disagreement shows
-    error = model_error_sd(per_facet.mean(axis=1), per_facet.std(axis=1))
+    # and, where the lobe's family answered alone on a sunless day, the
+    # others' spread (bayesgloss.lobe_families.SUNLESS_SPREAD)
+    lobes = json.loads(idata.posterior.attrs.get("lobe_family_spread", "null"))
+    error = model_error_sd(
+        per_facet.mean(axis=1), per_facet.std(axis=1), choices_sd=lobes["sd"] if lobes else 0.0
+    )
     rng = np.random.default_rng([seed, MODEL_ERROR_STREAM])
     facets = []
     for k, fid in enumerate(ids):
@@ -518,7 +526,9 @@ def _summarise(
     obj_flags = [] if obj_converged else ["not-converged"]
     if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
         obj_flags.append("mostly-saturated")
-    if _width(obj_within) > NOT_IDENTIFIABLE_WIDTH:
+    if _width(obj_within) > NOT_IDENTIFIABLE_WIDTH or (
+        lobes and _width(lobes["mixture"]) > NOT_IDENTIFIABLE_WIDTH
+    ):  # what the data tell, the lobe's family unknown where it answered alone
         obj_flags.append("gloss-not-identifiable")
     summary = {
         "object": {
@@ -531,6 +541,7 @@ def _summarise(
             "model": model,
             "facet_population_gamma": _quantiles(pop["mu"], GAMMA_BOUNDS),
             "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
+            "lobe_mixture_gamma": lobes["mixture"] if lobes else None,
             "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
             "facets_converged": int(conv.sum()),
             "facets": int(len(ids)),

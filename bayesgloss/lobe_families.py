@@ -56,13 +56,27 @@ is each family's Phong-equivalent exponent (:func:`bayesgloss.lobes.roughness_of
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
+
 from .fresnel import IN_LOBE
+from .intervals import GAMMA_BOUNDS
 from .intervals import posterior_quantiles as _quantiles
 from .joint_estimate import DEFAULT_FRESNEL, DEFAULT_LOBE_FAMILY
 from .lobes import LOBE_FAMILIES, check_lobe_family, roughness_of_exponent
+from .model_error import choice_spread
 from .stacking import fit_stacked
 
-__all__ = ["MATERIAL_FAMILIES", "DEFAULT_LOBE", "default_lobe", "check_lobe", "fit_lobe_families"]
+__all__ = [
+    "MATERIAL_FAMILIES",
+    "DEFAULT_LOBE",
+    "SUNLESS_SPREAD",
+    "SPREAD_STREAM",
+    "default_lobe",
+    "check_lobe",
+    "fit_lobe_families",
+]
 
 #: ``estimate``'s lobe where none is named and the joint model runs with no
 #: Fresnel model named (:func:`default_lobe`), since stop 42: on the two
@@ -72,6 +86,16 @@ __all__ = ["MATERIAL_FAMILIES", "DEFAULT_LOBE", "default_lobe", "check_lobe", "f
 #: 0.178, the reported interval holding the truth in 17 of 19 against 13,
 #: 1 confident miss against 4; Radiance: 0.065 against 0.063, 18 of 19 both).
 DEFAULT_LOBE = "materials"
+
+#: On a sunless day, fit the other families beside Phong, which answers alone,
+#: and add their spread to the model error (:func:`bayesgloss.model_error.choice_spread`;
+#: ``sunless_spread`` of :func:`bayesgloss.stacking.fit_stacked`). The object
+#: is flagged ``gloss-not-identifiable`` where their stack-weighted mixture's
+#: own 90 % interval is wider than :data:`bayesgloss.estimate.NOT_IDENTIFIABLE_WIDTH`:
+#: the data do not tell the lobe's shape, and gloss moves with it.
+SUNLESS_SPREAD = True
+#: The random stream (with the seed) of the families' mixture's draws.
+SPREAD_STREAM = 7
 
 #: ``--lobe materials``: label to (lobe family, Fresnel model) of each fit.
 MATERIAL_FAMILIES = {
@@ -204,10 +228,18 @@ def fit_lobe_families(
         attribute="lobe_family",
         ties="spread",
         sunless_default=True,
+        sunless_spread=SUNLESS_SPREAD,
         progress=progress,
         jobs=jobs,
         **sky_options,
     )
+    if stack.spread is not None:  # the families beside Phong on a sunless day
+        own = {k: post["gamma_object"].values for k, post in stack.spread["own"].items()}
+        rng = np.random.default_rng([seed, SPREAD_STREAM])
+        spread = choice_spread(own, stack.spread["weights"], rng)
+        stack.idata.posterior.attrs["lobe_family_spread"] = json.dumps(
+            {"sd": spread["sd"], "mixture": _quantiles(spread["mixture"], GAMMA_BOUNDS)}
+        )
     # the families' microfacet roughness differ in meaning; the mixture keeps none
     stack.idata.posterior = stack.idata.posterior.drop_vars("roughness_object", errors="ignore")
     families = stack.entries()

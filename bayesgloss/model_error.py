@@ -13,7 +13,7 @@ This module adds that error as a discrepancy, the way a measurement adds a
 systematic uncertainty to its statistical one: the material's gamma is
 
     gamma_material = gamma_object + delta,    delta ~ N(0, tau^2),
-    tau^2 = tau_floor^2 + tau_facets^2,
+    tau^2 = tau_floor^2 + tau_facets^2 + tau_choices^2,
 
 clipped to [0, 1] (a draw beyond a bound is at the bound: a matt or mirror
 material's interval then reaches it), where
@@ -40,6 +40,15 @@ material's interval then reaches it), where
   "Holdout 25 and Mitsuba holdout 12, a rule: a wider model-error floor
   where 1-3 facets measured gamma").
 
+- ``tau_choices`` is the spread of the answers of model choices the data
+  do not tell apart but the answer does not mix: on a sunless day the
+  glossy lobe's families predict alike and their gloss trades off with the
+  lobe's shape, yet Phong alone answers there (its median nearest the truth
+  on seen sunless days: :mod:`bayesgloss.lobe_families`); the other
+  families are fitted beside it and the stack-weighted sd of their medians
+  (:func:`choice_spread`) joins the error, so the interval carries the
+  lobe's shape without the mixture moving the median. 0 elsewhere.
+
 The model's own interval stays in the summary beside it
 (``gamma_within_model``): it is the one SBC checks and the one to use on
 data the model generated.
@@ -56,6 +65,7 @@ __all__ = [
     "model_error_floor",
     "paule_mandel_tau",
     "model_error_sd",
+    "choice_spread",
     "with_model_error",
 ]
 
@@ -145,16 +155,63 @@ def model_error_floor(facets: int) -> float:
     return FEW_FACETS_FLOOR if facets <= FEW_FACETS else MODEL_ERROR_FLOOR
 
 
-def model_error_sd(facet_mean, facet_sd, floor: float | None = None) -> dict:
-    """The model error's sd, tau = sqrt(floor^2 + tau_facets^2) (module
-    docstring), and its parts: ``{"sd", "floor", "facets_sd", "facets"}``
-    (``facets``: how many facets measured it). ``floor`` None takes
-    :func:`model_error_floor` of that count; a number fixes it."""
+def model_error_sd(
+    facet_mean, facet_sd, floor: float | None = None, choices_sd: float = 0.0
+) -> dict:
+    """The model error's sd, tau = sqrt(floor^2 + tau_facets^2 +
+    tau_choices^2) (module docstring), and its parts: ``{"sd", "floor",
+    "facets_sd", "facets", "choices_sd"}`` (``facets``: how many facets
+    measured it). ``floor`` None takes :func:`model_error_floor` of that
+    count; a number fixes it. ``choices_sd``: tau_choices
+    (:func:`choice_spread`), 0 where the answer mixes its choices."""
     n = _measured(facet_mean, facet_sd)[0].size
     t_f = paule_mandel_tau(facet_mean, facet_sd)
     if floor is None:
         floor = model_error_floor(n)
-    return {"sd": float(np.hypot(floor, t_f)), "floor": float(floor), "facets_sd": t_f, "facets": n}
+    sd = float(np.hypot(np.hypot(floor, t_f), choices_sd))
+    return {
+        "sd": sd,
+        "floor": float(floor),
+        "facets_sd": t_f,
+        "facets": n,
+        "choices_sd": float(choices_sd),
+    }
+
+
+def choice_spread(draws: dict, weights: dict, rng: np.random.Generator) -> dict:
+    """How far model choices' answers lie apart, where the answer is one choice's.
+
+    Parameters
+    ----------
+    draws : dict of str to ndarray
+        Each choice's posterior draws of gamma (any shape).
+    weights : dict of str to float
+        Each choice's stacking weight (ties spread; summing to 1).
+    rng : numpy.random.Generator
+        For the mixture's draws.
+
+    Returns
+    -------
+    dict
+        ``sd``: tau_choices, the weighted sd of the choices' posterior
+        medians about their weighted mean; ``mixture``: the draws of the
+        weighted mixture of the choices' posteriors (as many as the first
+        choice has), whose 90 % interval says what the data tell of gamma
+        with the choice unknown.
+    """
+    labels = [k for k in draws if weights.get(k, 0.0) > 0]
+    w = np.array([weights[k] for k in labels], float)
+    w /= w.sum()
+    med = np.array([np.median(draws[k]) for k in labels])
+    mean = float(np.sum(w * med))
+    sd = float(np.sqrt(np.sum(w * (med - mean) ** 2)))
+    size = np.asarray(next(iter(draws.values()))).size
+    pick = rng.choice(len(labels), size=size, p=w)
+    mixture = np.empty(size)
+    for j, k in enumerate(labels):
+        x, at = np.asarray(draws[k]).ravel(), pick == j
+        mixture[at] = x[rng.integers(x.size, size=int(at.sum()))]
+    return {"sd": sd, "mixture": mixture}
 
 
 def with_model_error(draws, sd: float, rng: np.random.Generator, bounds=(0.0, 1.0)) -> np.ndarray:

@@ -151,6 +151,11 @@ class StackedFits:
         record (``families``, ``most_weight``).
     seconds : float
         Sampling time of every fit.
+    spread : dict or None
+        With ``sunless_spread`` on a sunless day: the other choices, fitted
+        beside the default that answers alone, ``{"weights", "own"}`` (their
+        stacking weights and each choice's own posterior under the day's
+        sky); None elsewhere.
     """
 
     idata: object
@@ -162,6 +167,7 @@ class StackedFits:
     best: str
     sky: dict | None
     seconds: float
+    spread: dict | None = None
 
     def entries(self) -> dict:
         """Per choice, in the choices' order: its stacking scores and the
@@ -181,7 +187,7 @@ class StackedFits:
         ``sunless_default``, an overcast one), and
         ``sky_families`` where stacked."""
         info = {key: entries, best_key: best, "seconds": self.seconds}
-        info["stacked"] = len(self.own) > 1
+        info["stacked"] = len(self.own) > 1 and self.spread is None
         if self.sky is not None:
             info["sky_families"] = self.sky
         return info
@@ -237,6 +243,7 @@ def fit_stacked(
     perez_families=sky_families.DEFAULT_PEREZ_FAMILIES,
     ties="stacking",
     sunless_default=False,
+    sunless_spread=False,
     unidentified_sky=DEFAULT_UNIDENTIFIED_SKY,
 ) -> StackedFits:
     """The joint model once per choice of one option, stacked (module docstring).
@@ -279,6 +286,12 @@ def fit_stacked(
         lobe's shape: the lobe stack read 0.94 [0.79, 1.00] for a true 0.10
         (Mitsuba holdout 1, ms16) and 0.054 [0, 0.15] for a true 0 where
         Phong alone read 0.012 (holdout 8, vs18; ``studies/README.md``).
+    sunless_spread : bool
+        Where ``sunless_default`` leaves the default alone, fit the other
+        choices beside it all the same, under the day's most-weighted (or
+        named) sky, and weigh them as a stack would (``ties``); the answer
+        stays the default's, and :attr:`StackedFits.spread` carries the
+        others for :func:`bayesgloss.model_error.choice_spread`.
     unidentified_sky : {"every-near-sky", "default-alone"}
         Where the sky families got equal weights (the sky not identified):
         every choice fitted under each sky family sharing the weight, or
@@ -323,16 +336,22 @@ def fit_stacked(
                 args, seed, first, sky_fits, unmixed, labels, default, opts, ties, attribute,
                 progress, jobs, seconds,
             )  # fmt: skip
+        beside = others if sunless and sunless_spread else {}
         if sky_info.get("equal_weights") or sunless:  # the default alone
             labels, others = [default], {}
         fits = {default: first[:3]}
         fits.update(_fit_each(args, sky_info["most_weight"], seed, options, others, progress, jobs))
+        day_sky, default_own = sky_info["most_weight"], unmixed.get(sky_info["most_weight"])
     else:
+        beside = {}
         if sunless_default and illumination in sky_families.OVERCAST_GROUP:
+            if sunless_spread:
+                beside = {k: opts(k) for k in labels if k != default}
             labels = [default]
         fits = _fit_each(
             args, illumination, seed, options, {k: opts(k) for k in labels}, progress, jobs
         )
+        day_sky, default_own = illumination, None
     own = {label: fits[label][0].posterior.copy(deep=True) for label in labels}
     scores = _choice_weights({label: fits[label][0] for label in labels}, ties, guard=False)
     weights = np.array([scores[label]["weight"] for label in labels])
@@ -356,7 +375,19 @@ def fit_stacked(
     )
     idata.posterior.attrs[f"{attribute}_most_weight"] = best
     idata.posterior.attrs[f"{attribute}_stacked"] = int(len(labels) > 1)
-    return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds)
+    spread = None
+    if beside:  # the other choices fitted beside the default, which answers alone
+        extra = _fit_each(args, day_sky, seed, options, beside, progress, jobs)
+        seconds += sum(fit[1].seconds for fit in extra.values())
+        pool = {default: fits[default][0], **{k: fit[0] for k, fit in extra.items()}}
+        scores = _choice_weights(pool, ties, guard=False)
+        base = own[default] if default_own is None else default_own
+        own = {default: own[default], **{k: fit[0].posterior for k, fit in extra.items()}}
+        spread = {
+            "weights": {k: float(scores[k]["weight"]) for k in pool},
+            "own": {default: base, **{k: own[k] for k in extra}},
+        }
+    return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds, spread)
 
 
 def _choice_weights(idatas: dict, ties: str, guard: bool) -> dict:

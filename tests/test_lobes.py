@@ -391,3 +391,41 @@ def test_the_rise_inside_the_lobe_takes_its_lobe():
     for lobe in ("phong", "ward", "families"):
         with pytest.raises(ValueError, match="inside the 'ggx' lobe; lobe '"):
             lobe_families.check_lobe(lobe, "schlick-lobe", True)
+
+
+def test_a_sunless_day_answers_with_phong_and_carries_the_other_lobes_spread(tmp_path):
+    # a forward-model object (specularity 0.5, Phong) under gensky's
+    # overcast sky, named, the lobe families stacked as the default stacks
+    # them: Phong answers alone (flagged lobe-family-not-stacked), the other
+    # families are fitted beside it and their stack-weighted spread is in the
+    # model error (choices_sd, recomputed here from the summary's weights and
+    # the families' own medians), and the object is flagged
+    # gloss-not-identifiable exactly where their mixture is wider than 0.6
+    from conftest import make_synthetic_bundle
+
+    path = make_synthetic_bundle(tmp_path / "overcast", sky_model="gensky-overcast", noise=0.02)
+    res = estimate.estimate_bundle(
+        path,
+        per_frame=True,
+        illumination="gensky-overcast",
+        lobe="materials",
+        ground_shadow="none",
+        jobs=2,
+        sampler_options={"max_steps": 300},
+    )
+    s = res.summary
+    fam = s["lobe_families"]
+    assert list(fam) == ["phong", "ward", "ggx", "ggx-schlick"]
+    assert "lobe-family-not-stacked" in s["object"]["flags"]
+    assert s["object"]["gamma_within_model"]["median"] == fam["phong"]["gamma"]["median"]
+    w = np.array([fam[k]["weight"] for k in fam])
+    assert w.sum() == pytest.approx(1.0)
+    med = np.array([fam[k]["gamma"]["median"] for k in fam])  # under the named sky
+    sd = np.sqrt(np.sum(w * (med - np.sum(w * med)) ** 2))
+    error = s["object"]["model_error"]
+    assert error["choices_sd"] == pytest.approx(sd, rel=1e-6, abs=1e-9)
+    assert error["sd"] ** 2 == pytest.approx(error["floor"] ** 2 + error["facets_sd"] ** 2 + sd**2)
+    mixture = s["object"]["lobe_mixture_gamma"]
+    wide = np.ptp(mixture["hdi90"]) > estimate.NOT_IDENTIFIABLE_WIDTH
+    own_wide = np.ptp(s["object"]["gamma_within_model"]["hdi90"]) > estimate.NOT_IDENTIFIABLE_WIDTH
+    assert ("gloss-not-identifiable" in s["object"]["flags"]) == (wide or own_wide)

@@ -73,3 +73,35 @@ def test_with_model_error_widens_and_clips_at_the_bounds():
     assert edge.min() >= 0.0 and edge.max() <= 1.0
     same = me.with_model_error(np.array([0.3, 0.7]), 0.0, rng)
     assert np.array_equal(same, [0.3, 0.7])
+
+
+def test_choice_spread_is_the_weighted_sd_of_the_medians_and_mixes_by_weight():
+    # three choices whose draws sit at 0.1, 0.5 and 0.9 (medians exactly
+    # those); weights 0.5, 0.5, 0: the third is left out, the sd is that of
+    # {0.1, 0.5} with equal weights, 0.2, and the mixture's draws are half
+    # from each of the first two (binomial sd of the share at 4000 draws
+    # 0.008, so 0.04 is five sd)
+    rng = np.random.default_rng(3)
+    draws = {
+        "a": 0.1 + 0.01 * rng.standard_normal(4000),
+        "b": 0.5 + 0.01 * rng.standard_normal(4000),
+        "c": np.full(4000, 0.9),
+    }
+    draws = {k: v - np.median(v) + {"a": 0.1, "b": 0.5, "c": 0.9}[k] for k, v in draws.items()}
+    out = me.choice_spread(draws, {"a": 0.5, "b": 0.5, "c": 0.0}, np.random.default_rng(4))
+    assert out["sd"] == pytest.approx(0.2, abs=1e-12)
+    x = out["mixture"]
+    assert x.size == 4000 and not np.any(x > 0.8)
+    assert np.mean(x < 0.3) == pytest.approx(0.5, abs=0.04)
+    # one choice alone: no spread, its own draws
+    one = me.choice_spread(draws, {"a": 1.0}, np.random.default_rng(4))
+    assert one["sd"] == 0.0 and np.all(np.isin(one["mixture"], draws["a"]))
+
+
+def test_model_error_sd_adds_the_choices_spread_in_quadrature():
+    mean, sd = np.array([0.3, 0.32, 0.35, 0.31]), np.full(4, 0.01)
+    plain = me.model_error_sd(mean, sd)
+    assert me.model_error_sd(mean, sd, choices_sd=0.0)["sd"] == plain["sd"]  # bit for bit
+    wide = me.model_error_sd(mean, sd, choices_sd=0.3)
+    assert wide["sd"] ** 2 == pytest.approx(plain["sd"] ** 2 + 0.09)
+    assert wide["choices_sd"] == 0.3

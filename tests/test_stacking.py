@@ -194,6 +194,58 @@ def test_a_sunless_day_leaves_the_lobes_unstacked(monkeypatch):
     assert calls == ["phong"] and list(alone.own) == ["phong"]
 
 
+def test_a_sunless_day_fits_the_other_lobes_beside_the_default_that_answers(monkeypatch):
+    # with sunless_spread, a sunless day's other lobes are fitted beside
+    # Phong under the day's sky and weighed as a stack would (here Ward
+    # ahead by 5 nats a draw-entry, so alone), but the answer stays Phong's
+    # own draws (0.2, the sky mixture's) and the record says not stacked;
+    # the spread carries each lobe's own posterior under the day's sky
+    import arviz as az
+
+    sky = "gensky-overcast"
+
+    def fake_families(*args, **kwargs):
+        post = {"gamma_object": np.full((2, 50), 0.2), "n_object": np.ones((2, 50))}
+        idata = az.from_dict(posterior=post, log_likelihood={"y": np.full((2, 50, 3, 4), -6.0)})
+        idata.posterior.attrs.update(
+            sky_family_weights="{}", sky_family_most_weight=sky, sky_family_equal_weights=0
+        )
+        under_sky = az.from_dict(posterior={"gamma_object": np.full((2, 50), 0.25)}).posterior
+        samples = SimpleNamespace(seconds=1.0, facets=SimpleNamespace(seconds=0.0))
+        info = {"most_weight": sky, "equal_weights": False, "seconds": 1.0}
+        return idata, samples, None, info | {"fits": {}, "posteriors": {sky: under_sky}}
+
+    monkeypatch.setattr(sky_families, "fit_families", fake_families)
+    calls = _fake_fits(monkeypatch, {"ward": -1.0}, spread=0.05)
+    kw = dict(option="lobe_family", default="phong", attribute="lobe_family")
+    choices = {"phong": "phong", "ward": "ward", "ggx": "ggx"}
+    args = (*(None,) * 6, "families", 0, {})
+    out = stacking.fit_stacked(
+        *args, choices=choices, sunless_default=True, sunless_spread=True, **kw
+    )
+    assert calls == ["ward", "ggx"] and out.best == "phong"
+    assert np.all(out.idata.posterior["gamma_object"].values == 0.2)
+    assert out.record("k", {}, "b", out.best)["stacked"] is False
+    assert out.spread["weights"]["ward"] == pytest.approx(1.0)
+    assert float(out.spread["own"]["phong"]["gamma_object"].mean()) == 0.25  # under the day's sky
+    assert float(out.spread["own"]["ggx"]["gamma_object"].mean()) == pytest.approx(0.2)
+    # on a sun-lit day nothing is fitted beside: the lobes are stacked
+    calls.clear()
+    sky = "gensky-clear"
+    sunlit = stacking.fit_stacked(
+        *args, choices=choices, sunless_default=True, sunless_spread=True, **kw
+    )
+    assert calls == ["ward", "ggx"] and sunlit.spread is None and sunlit.best == "ward"
+    # a named overcast sky: the others fitted under it beside the default
+    calls.clear()
+    named = (*(None,) * 6, "gensky-overcast", 0, {})
+    alone = stacking.fit_stacked(
+        *named, choices=choices, sunless_default=True, sunless_spread=True, **kw
+    )
+    assert calls == ["phong", "ward", "ggx"] and alone.best == "phong"
+    assert set(alone.spread["own"]) == {"phong", "ward", "ggx"}
+
+
 def test_the_sky_options_reach_the_sky_families_under_a_second_stack(tmp_path, monkeypatch):
     # --lobe families (and the stacked occluder albedo, the default with a
     # mesh) stacks the sky families first: --unreliable-loo and
