@@ -48,9 +48,9 @@ object's draws with the error are ``gamma_material`` in the InferenceData.
 
 Flags of the summary: a facet ``not-converged``, ``gloss-not-identifiable``
 (the model's own 90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`:
-what the data tell, the model's error aside; for the object also where,
-on a sunless day answered by Phong alone, the lobe families' stack-weighted
-mixture is that wide: ``lobe_mixture_gamma``, :data:`bayesgloss.lobe_families.SUNLESS_SPREAD`),
+what the data tell, the model's error aside; for the object also where Phong
+answered a sunless day alone and the lobe families' mixture is that wide:
+``lobe_mixture_gamma``, :func:`bayesgloss.lobe_families.sunless_spread_of`),
 ``mostly-saturated`` (more than half its usable entries are lower bounds),
 or, left out, ``too-few-frames`` or ``saturated`` (too few measured
 entries); the object the same, ``mostly-saturated`` over the facets used.
@@ -65,7 +65,6 @@ entries); the object the same, ``mostly-saturated`` over the facets used.
 from __future__ import annotations
 
 import functools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +75,7 @@ from . import likelihood as lk
 from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_inference_data
 from .fresnel import check_fresnel_model
 from .ground_facing import DEFAULT_GROUND_FACING, leave_out_ground_facing
-from .intervals import GAMMA_BOUNDS, reported_interval
+from .intervals import GAMMA_BOUNDS, reported_width
 from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
@@ -444,12 +443,6 @@ def estimate_bundle(
     return out
 
 
-def _width(q: dict) -> float:
-    """Width of the reported 90 % interval of a summary entry."""
-    lo, hi = reported_interval(q)
-    return hi - lo
-
-
 def _summarise(
     b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing=None
 ):
@@ -464,21 +457,18 @@ def _summarise(
     _, usable, censored = observations(curves)
     # kept facets whose usable entries are mostly lower bounds
     mostly_saturated = censored[keep].sum(1) > 0.5 * usable[keep].sum(1)
-    # the model's error of the material's gloss (bayesgloss.model_error), from
-    # the facets' disagreement and the floor no disagreement shows
-    # and, where the lobe's family answered alone on a sunless day, the
-    # others' spread (bayesgloss.lobe_families.SUNLESS_SPREAD)
-    lobes = json.loads(idata.posterior.attrs.get("lobe_family_spread", "null"))
-    error = model_error_sd(
-        per_facet.mean(axis=1), per_facet.std(axis=1), choices_sd=lobes["sd"] if lobes else 0.0
-    )
+    # the model's error of the material's gloss (bayesgloss.model_error): the facets'
+    # disagreement, the floor no disagreement shows and, where Phong answered a
+    # sunless day alone, the other lobe families' spread
+    lobes = lobe_families.sunless_spread_of(idata.posterior) or {"sd": 0.0, "mixture": None}
+    error = model_error_sd(per_facet.mean(axis=1), per_facet.std(axis=1), choices_sd=lobes["sd"])
     rng = np.random.default_rng([seed, MODEL_ERROR_STREAM])
     facets = []
     for k, fid in enumerate(ids):
         flags = [] if diag["converged"][k] else ["not-converged"]
         within = _quantiles(per_facet[k], GAMMA_BOUNDS)
         gq = _quantiles(with_model_error(per_facet[k], error["sd"], rng), GAMMA_BOUNDS)
-        if _width(within) > NOT_IDENTIFIABLE_WIDTH:  # what the data tell, not the model's error
+        if reported_width(within) > NOT_IDENTIFIABLE_WIDTH:  # the data, not the model error
             flags.append("gloss-not-identifiable")
         if mostly_saturated[k]:
             flags.append("mostly-saturated")
@@ -526,9 +516,9 @@ def _summarise(
     obj_flags = [] if obj_converged else ["not-converged"]
     if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
         obj_flags.append("mostly-saturated")
-    if _width(obj_within) > NOT_IDENTIFIABLE_WIDTH or (
-        lobes and _width(lobes["mixture"]) > NOT_IDENTIFIABLE_WIDTH
-    ):  # what the data tell, the lobe's family unknown where it answered alone
+    # what the data tell; where Phong answered alone, with the lobe's family unknown
+    widths = [reported_width(q) for q in (obj_within, lobes["mixture"]) if q is not None]
+    if max(widths) > NOT_IDENTIFIABLE_WIDTH:
         obj_flags.append("gloss-not-identifiable")
     summary = {
         "object": {
@@ -541,7 +531,7 @@ def _summarise(
             "model": model,
             "facet_population_gamma": _quantiles(pop["mu"], GAMMA_BOUNDS),
             "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
-            "lobe_mixture_gamma": lobes["mixture"] if lobes else None,
+            "lobe_mixture_gamma": lobes["mixture"],
             "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
             "facets_converged": int(conv.sum()),
             "facets": int(len(ids)),

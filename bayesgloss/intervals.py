@@ -27,6 +27,7 @@ __all__ = [
     "highest_density_interval",
     "posterior_quantiles",
     "reported_interval",
+    "reported_width",
 ]
 
 #: The support of the gloss factor gamma.
@@ -109,3 +110,9 @@ def reported_interval(q: dict) -> tuple[float, float]:
     ``q05``, ``q95`` in a summary written before it had one."""
     lo, hi = q.get("hdi90") or (q["q05"], q["q95"])
     return float(lo), float(hi)
+
+
+def reported_width(q: dict) -> float:
+    """Width of the 90 % interval a summary entry reports (:func:`reported_interval`)."""
+    lo, hi = reported_interval(q)
+    return hi - lo

@@ -73,3 +73,10 @@ def test_hdi_of_a_matt_posterior_reaches_zero_with_bounds():
     )
     top = intervals.posterior_quantiles(1.0 - x, bounds=(0.0, 1.0))
     assert top["hdi90"][1] == 1.0 and top["q95"] < 1.0
+
+
+def test_reported_width_is_the_hdi_and_falls_back_to_the_quantiles():
+    # the width of the interval bayesgloss reports: the HDI where a summary
+    # has one, the equal-tailed quantiles in one written before it had
+    assert intervals.reported_width({"hdi90": [0.1, 0.4], "q05": 0.0, "q95": 0.9}) == 0.4 - 0.1
+    assert intervals.reported_width({"q05": 0.2, "q95": 0.7}) == 0.7 - 0.2
