@@ -155,9 +155,10 @@ SCORED_ELSEWHERE = {
     # stop 67's probe on the seen pool: sunless-lobes with every lobe's
     # roughness at most 0.5 (the exponent prior's n >= 6)
     "sunless-lobes-cap": "perez",
-    # stop 69's candidate, branch sunless-lobe-error: on sunless days Phong
-    # answers alone as before, the other lobes fitted beside it and their
-    # spread in the model error (bayesgloss.model_error.choice_spread)
+    # stop 69's candidate, branch sunless-lobe-error, the default since stop
+    # 70: on sunless days Phong answers alone as before, the other lobes
+    # fitted beside it and their spread in the model error
+    # (bayesgloss.model_error.choice_spread)
     "sunless-lobe-error": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
@@ -224,7 +225,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout12": ("baseline", "perez"),  # the default after stop 61, measured (stop 62)
     "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
     "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
-    "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error scored (69)
+    "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -250,7 +251,7 @@ DEFAULT_METHODS = {
     "validation_holdout26": ("baseline", "perez"),  # the default after stop 63, measured
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
     "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
-    "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error scored (69)
+    "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
 }
 
 
