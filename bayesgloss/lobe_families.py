@@ -243,10 +243,11 @@ def fit_lobe_families(
         jobs=jobs,
         **sky_options,
     )
-    if stack.spread is not None:  # the families beside Phong on a sunless day
-        own = {k: post["gamma_object"].values for k, post in stack.spread["own"].items()}
+    beside = stack.beside()
+    if beside is not None:  # the families beside Phong on a sunless day
+        own = {k: post["gamma_object"].values for k, post in beside["own"].items()}
         rng = np.random.default_rng([seed, SPREAD_STREAM])
-        spread = choice_spread(own, stack.spread["weights"], rng)
+        spread = choice_spread(own, beside["weights"], rng)
         stack.idata.posterior.attrs["lobe_family_spread"] = json.dumps(
             {"sd": spread["sd"], "mixture": _quantiles(spread["mixture"], GAMMA_BOUNDS)}
         )

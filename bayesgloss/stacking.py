@@ -151,11 +151,11 @@ class StackedFits:
         record (``families``, ``most_weight``).
     seconds : float
         Sampling time of every fit.
-    spread : dict or None
-        With ``sunless_spread`` on a sunless day: the other choices, fitted
-        beside the default that answers alone, ``{"weights", "own"}`` (their
-        stacking weights and each choice's own posterior under the day's
-        sky); None elsewhere.
+    beside_own : xarray.Dataset or None
+        With ``sunless_spread`` on a sunless day, where the other choices
+        were fitted beside the default that answers alone (``own`` and
+        ``scores`` then hold all of them, the default first): the default's
+        own posterior under the day's sky (:meth:`beside`); None elsewhere.
     """
 
     idata: object
@@ -167,7 +167,17 @@ class StackedFits:
     best: str
     sky: dict | None
     seconds: float
-    spread: dict | None = None
+    beside_own: object | None = None
+
+    def beside(self) -> dict | None:
+        """Where the other choices were fitted beside the default: their
+        stacking weights and own posteriors under the day's sky,
+        ``{"weights", "own"}``, the default first; None elsewhere."""
+        if self.beside_own is None:
+            return None
+        default = next(iter(self.own))
+        own = {k: self.beside_own if k == default else post for k, post in self.own.items()}
+        return {"weights": {k: float(self.scores[k]["weight"]) for k in own}, "own": own}
 
     def entries(self) -> dict:
         """Per choice, in the choices' order: its stacking scores and the
@@ -187,7 +197,7 @@ class StackedFits:
         ``sunless_default``, an overcast one), and
         ``sky_families`` where stacked."""
         info = {key: entries, best_key: best, "seconds": self.seconds}
-        info["stacked"] = len(self.own) > 1 and self.spread is None
+        info["stacked"] = len(self.own) > 1 and self.beside_own is None
         if self.sky is not None:
             info["sky_families"] = self.sky
         return info
@@ -290,7 +300,7 @@ def fit_stacked(
         Where ``sunless_default`` leaves the default alone, fit the other
         choices beside it all the same, under the day's most-weighted (or
         named) sky, and weigh them as a stack would (``ties``); the answer
-        stays the default's, and :attr:`StackedFits.spread` carries the
+        stays the default's, and :meth:`StackedFits.beside` gives the
         others for :func:`bayesgloss.model_error.choice_spread`.
     unidentified_sky : {"every-near-sky", "default-alone"}
         Where the sky families got equal weights (the sky not identified):
@@ -375,19 +385,15 @@ def fit_stacked(
     )
     idata.posterior.attrs[f"{attribute}_most_weight"] = best
     idata.posterior.attrs[f"{attribute}_stacked"] = int(len(labels) > 1)
-    spread = None
+    beside_own = None
     if beside:  # the other choices fitted beside the default, which answers alone
         extra = _fit_each(args, day_sky, seed, options, beside, progress, jobs)
         seconds += sum(fit[1].seconds for fit in extra.values())
         pool = {default: fits[default][0], **{k: fit[0] for k, fit in extra.items()}}
         scores = _choice_weights(pool, ties, guard=False)
-        base = own[default] if default_own is None else default_own
+        beside_own = own[default] if default_own is None else default_own
         own = {default: own[default], **{k: fit[0].posterior for k, fit in extra.items()}}
-        spread = {
-            "weights": {k: float(scores[k]["weight"]) for k in pool},
-            "own": {default: base, **{k: own[k] for k in extra}},
-        }
-    return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds, spread)
+    return StackedFits(idata, samples, used, fits, own, scores, best, sky_info, seconds, beside_own)
 
 
 def _choice_weights(idatas: dict, ties: str, guard: bool) -> dict:

@@ -226,16 +226,16 @@ def test_a_sunless_day_fits_the_other_lobes_beside_the_default_that_answers(monk
     assert calls == ["ward", "ggx"] and out.best == "phong"
     assert np.all(out.idata.posterior["gamma_object"].values == 0.2)
     assert out.record("k", {}, "b", out.best)["stacked"] is False
-    assert out.spread["weights"]["ward"] == pytest.approx(1.0)
-    assert float(out.spread["own"]["phong"]["gamma_object"].mean()) == 0.25  # under the day's sky
-    assert float(out.spread["own"]["ggx"]["gamma_object"].mean()) == pytest.approx(0.2)
+    assert out.beside()["weights"]["ward"] == pytest.approx(1.0)
+    assert float(out.beside()["own"]["phong"]["gamma_object"].mean()) == 0.25  # under the day's sky
+    assert float(out.beside()["own"]["ggx"]["gamma_object"].mean()) == pytest.approx(0.2)
     # on a sun-lit day nothing is fitted beside: the lobes are stacked
     calls.clear()
     sky = "gensky-clear"
     sunlit = stacking.fit_stacked(
         *args, choices=choices, sunless_default=True, sunless_spread=True, **kw
     )
-    assert calls == ["ward", "ggx"] and sunlit.spread is None and sunlit.best == "ward"
+    assert calls == ["ward", "ggx"] and sunlit.beside() is None and sunlit.best == "ward"
     # a named overcast sky: the others fitted under it beside the default
     calls.clear()
     named = (*(None,) * 6, "gensky-overcast", 0, {})
@@ -243,7 +243,10 @@ def test_a_sunless_day_fits_the_other_lobes_beside_the_default_that_answers(monk
         *named, choices=choices, sunless_default=True, sunless_spread=True, **kw
     )
     assert calls == ["phong", "ward", "ggx"] and alone.best == "phong"
-    assert set(alone.spread["own"]) == {"phong", "ward", "ggx"}
+    # the default first, then the others in the choices' order: the order the
+    # spread's mixture draws from (model_error.choice_spread)
+    assert list(alone.beside()["own"]) == ["phong", "ward", "ggx"]
+    assert list(alone.beside()["weights"]) == ["phong", "ward", "ggx"]
 
 
 def test_the_sky_options_reach_the_sky_families_under_a_second_stack(tmp_path, monkeypatch):
