@@ -32,6 +32,11 @@ measured the object's gamma (the score's ``model_error.facets``: too few
 for their disagreement to show the model's error) and ``--floor`` where
 more did.
 
+Stop 71's candidate (``--choose-more``, "Holdout 30 and Mitsuba holdout
+16" in ``studies/README.md``): the floor 0.01 where more than
+:data:`FEW_FACETS` facets measured gamma, 0.13 where fewer did, with a
+condition (6) on the objects it acts on (``--more-facets-min 0.85``).
+
 Usage::
 
     python studies/floor_rule.py --set mitsuba_holdout9 --set validation_holdout20 \\
@@ -158,9 +163,12 @@ def apply_rule(
     sets: dict[str, list[dict]],
     floor: float = CANDIDATE_FLOOR,
     few_facets_floor: float | None = None,
+    more_facets_min: float | None = None,
 ) -> dict:
     """The rule on ``sets`` (set name to its scores); the candidate's floor
-    :func:`with_floor`'s."""
+    :func:`with_floor`'s. ``more_facets_min``: stop 71's condition (6), the
+    candidate's pooled coverage of the sun-lit objects whose gamma more than
+    :data:`FEW_FACETS` facets measured at least this."""
     rng = np.random.default_rng(SEED)
     rows = {"default": {}, "candidate": {}}
     groups = {"default": {}, "candidate": {}}  # "<renderer>:<few|more>" and "<few|more>"
@@ -189,6 +197,12 @@ def apply_rule(
         met = decision.pop("met")  # (5) goes before it
         decision[FIVE] = bool(few is not None and few <= FEW_WIDTH_MAX)
         decision["met"] = met and decision[FIVE]
+    if more_facets_min is not None:  # stop 71's rule adds (6)
+        more = by_group.get("more", {}).get("candidate", {}).get("coverage")
+        met = decision.pop("met")
+        six = f"(6) objects of more facets: pooled coverage at least {more_facets_min:.0%}"
+        decision[six] = bool(more is not None and more >= more_facets_min)
+        decision["met"] = met and decision[six]
     return {
         "floor": floor,
         "few_facets_floor": few_facets_floor,
@@ -336,6 +350,67 @@ def choose_few_facets_floor(sets: dict[str, list[dict]] | None = None) -> dict:
     }
 
 
+#: Stop 71's seen pools for the floor where more than FEW_FACETS facets
+#: measured gamma: every mixed set scored since stop 55 with its default of
+#: the day (the broad pool), and those scored with today's default but for
+#: stop 70's sunless change (the current pool; holdout 27 and Mitsuba
+#: holdout 15 are sunless, so none of their objects is filed).
+SEEN_STOP71_BROAD = {
+    name: "perez"
+    for name in (
+        "validation_holdout19", "validation_holdout20", "validation_holdout23",
+        "validation_holdout25", "validation_holdout26", "validation_holdout28",
+        "mitsuba_holdout9", "mitsuba_holdout10", "mitsuba_holdout12",
+        "mitsuba_holdout13", "mitsuba_holdout14",
+    )
+}  # fmt: skip
+SEEN_STOP71_CURRENT = {
+    name: "perez"
+    for name in (
+        "validation_holdout26", "validation_holdout28", "mitsuba_holdout13", "mitsuba_holdout14"
+    )
+}  # fmt: skip
+#: Stop 71's criterion: the coverage the many-facet objects must reach in both pools.
+MORE_COVERAGE = 0.90
+
+
+def choose_more_facets_floor(pools: dict[str, dict] | None = None) -> dict:
+    """Stop 71's candidate: the smallest floor of :data:`GRID` at which the
+    sun-lit objects whose gamma more than :data:`FEW_FACETS` facets measured
+    hold the truth in at least :data:`MORE_COVERAGE` pooled over both
+    renderers, in the broad seen pool and in the current one alike
+    (:data:`SEEN_STOP71_BROAD`, :data:`SEEN_STOP71_CURRENT`); with each
+    floor's :func:`figures` per renderer and pooled (``--choose-more``)."""
+    if pools is None:
+        pools = {
+            "broad": seen_sun_lit(SEEN_STOP71_BROAD),
+            "current": seen_sun_lit(SEEN_STOP71_CURRENT),
+        }
+
+    def keys(name, group):
+        return (renderer(name), "pooled") if group == "more" else ()
+
+    table = {}
+    for floor in GRID:
+        table[float(floor)] = {
+            pool: {
+                key: figures(rows)
+                for key, rows in sorted(floored_cells(sets, floor, None, keys).items())
+            }
+            for pool, sets in pools.items()
+        }
+    good = [
+        f
+        for f, c in table.items()
+        if all(c[pool]["pooled"]["coverage"] >= MORE_COVERAGE for pool in pools)
+    ]
+    return {
+        "pools": {pool: {k: len(v) for k, v in sets.items()} for pool, sets in pools.items()},
+        "table": table,
+        "chosen": min(good) if good else None,
+    }
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", action="append", default=[], choices=sorted(SETS))
@@ -360,8 +435,20 @@ def main(argv=None) -> dict:
         action="store_true",
         help="print how stop 62's few-facet floor was chosen (SEEN_STOP62)",
     )
+    ap.add_argument(
+        "--choose-more",
+        action="store_true",
+        help="print how stop 71's floor for more facets was chosen (SEEN_STOP71_*)",
+    )
+    ap.add_argument(
+        "--more-facets-min",
+        type=float,
+        help="stop 71's condition (6): the pooled coverage objects of more facets must reach",
+    )
     args = ap.parse_args(argv)
-    if args.choose_few:
+    if args.choose_more:
+        out = choose_more_facets_floor()
+    elif args.choose_few:
         out = choose_few_facets_floor()
     elif args.by_facets:
         out = by_facet_count()
@@ -369,7 +456,7 @@ def main(argv=None) -> dict:
         out = choose_floor()
     else:
         sets = {name: load_scores(name, args.cached) for name in args.set}
-        out = apply_rule(sets, args.floor, args.few_facets_floor)
+        out = apply_rule(sets, args.floor, args.few_facets_floor, args.more_facets_min)
     return report(out, args.json)
 
 

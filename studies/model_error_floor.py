@@ -68,10 +68,13 @@ def development_scores(jobs: int) -> list[dict]:
 
 
 def widened(entry: dict, floor: float, rng: np.random.Generator) -> dict:
-    """The reported interval of a score's object posterior with the model error."""
+    """The reported interval of a score's object posterior with the model
+    error at ``floor`` (the score's tau_choices kept: a sunless day's other
+    lobes, 0 in scores from before stop 70)."""
     q = np.asarray(entry["object_quantiles"])
     fac = entry["facet_gamma"]
-    sd = model_error_sd(fac["mean"], fac["sd"], floor=floor)["sd"]
+    choices = entry.get("model_error", {}).get("choices_sd", 0.0)
+    sd = model_error_sd(fac["mean"], fac["sd"], floor=floor, choices_sd=choices)["sd"]
     draws = with_model_error(np.repeat(q, 50), sd, rng)
     return posterior_quantiles(draws, GAMMA_BOUNDS)
 

@@ -81,6 +81,7 @@ SETS = {
     "validation_holdout27": "validation_holdout27",
     "validation_holdout28": "validation_holdout28",
     "validation_holdout29": "validation_holdout29",
+    "validation_holdout30": "validation_holdout30",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -97,6 +98,7 @@ SETS = {
     "mitsuba_holdout13": "validation_mitsuba_holdout13",
     "mitsuba_holdout14": "validation_mitsuba_holdout14",
     "mitsuba_holdout15": "validation_mitsuba_holdout15",
+    "mitsuba_holdout16": "validation_mitsuba_holdout16",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -226,6 +228,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout13": ("baseline", "perez"),  # the default after stop 63, measured
     "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
     "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
+    "mitsuba_holdout16": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -252,6 +255,7 @@ DEFAULT_METHODS = {
     "validation_holdout27": ("baseline", "perez"),  # sunless days; the sun floor's second test
     "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
     "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
+    "validation_holdout30": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
 }
 
 

@@ -679,6 +679,75 @@ def test_floor_rule_condition_five_refuses_a_few_facet_floor_wider_than_half():
     assert fr.FIVE not in fr.apply_rule({"mitsuba_holdout12": scores}, 0.06)["decision"]
 
 
+def test_floor_rule_chooses_the_smallest_floor_for_more_facets_holding_90_percent_in_both_pools():
+    # stop 71's chooser: posteriors N(0.5, 0.01) of 4-facet objects whose
+    # facets agree, so the model error is the floor alone and a floor f
+    # gives a 90 % interval of about +-1.645 hypot(f, 0.01): +-0.0233 at
+    # 0.01 and +-0.0297 at 0.015. Truths
+    # 0.027 away are missed at 0.01 and held at 0.015 (0.003 either side
+    # of the bounds; the seeded draws move them by about 0.001). With 9 of
+    # 10 such objects in the broad pool held at any floor and the tenth
+    # 0.027 away, the broad pool reaches 90 % at 0; the current pool (the
+    # same plus one more 0.027 away: 9 of 11 held until 0.015) decides, so
+    # the floor chosen is 0.015, not 0.01 and not 0. A 3-facet object is
+    # not counted.
+    fr = study_module("floor_rule")
+
+    def scores(far: int) -> list[dict]:
+        out = [_floor_score(f"ms{i:02d}", 0.5, 0.5) for i in range(9)]
+        out += [_floor_score(f"ms{9 + i:02d}", 0.527, 0.5) for i in range(far)]
+        few = _floor_score("ms20", 0.9, 0.5)
+        few["perez"]["model_error"] = {"facets": 3}
+        for s in out:
+            s["perez"]["model_error"] = {"facets": 4}
+        return [*out, few]
+
+    out = fr.choose_more_facets_floor(
+        {"broad": {"mitsuba_holdout13": scores(1)}, "current": {"mitsuba_holdout14": scores(2)}}
+    )
+    assert out["chosen"] == 0.015
+    table = out["table"]
+    assert table[0.0]["broad"]["pooled"]["held"] == 9  # 9 of 10: 90 % already
+    assert table[0.01]["current"]["pooled"]["held"] == 9  # 9 of 11
+    assert table[0.015]["current"]["pooled"]["held"] == 11
+    assert table[0.015]["current"]["pooled"]["sun_lit"] == 11  # the 3-facet one left out
+
+
+def test_floor_rule_condition_six_asks_coverage_of_objects_of_more_facets():
+    # stop 71's rule adds (6): the candidate's pooled coverage of sun-lit
+    # objects whose gamma more than 3 facets measured at least 85 %. Ten
+    # 4-facet objects, N(0.5, 0.01), two of them 0.05 from the truth: at a
+    # floor of 0.01 (+-0.023) those two are missed (8 of 10, 80 %), at 0.04
+    # (+-0.068) held (the draws' error about 0.002)
+    fr = study_module("floor_rule")
+    scores = [_floor_score(f"ms{i:02d}", 0.5, 0.5) for i in range(8)]
+    scores += [_floor_score(f"ms{8 + i:02d}", 0.55, 0.5) for i in range(2)]
+    for s in scores:
+        s["perez"]["model_error"] = {"facets": 4}
+    box = _floor_score("ms10", 0.5, 0.5)  # a box, for (5): held at 0.13 either way
+    box["perez"]["model_error"] = {"facets": 2}
+    scores.append(box)
+    low = fr.apply_rule({"mitsuba_holdout16": scores}, 0.01, 0.13, more_facets_min=0.85)
+    ok = fr.apply_rule({"mitsuba_holdout16": scores}, 0.04, 0.13, more_facets_min=0.85)
+    six = "(6) objects of more facets: pooled coverage at least 85%"
+    assert low["by_facet_group"]["more"]["candidate"]["held"] == 8
+    assert not low["decision"][six] and not low["decision"]["met"]
+    assert ok["decision"][six] and ok["decision"]["met"]
+    assert six not in fr.apply_rule({"mitsuba_holdout16": scores}, 0.04, 0.13)["decision"]
+
+
+def test_floor_rule_keeps_a_sunless_days_lobe_spread_when_it_widens():
+    # since stop 70 a sunless day's model error holds tau_choices (the other
+    # lobes' spread): a floor applied again must keep it, so an object
+    # N(0.5, 0.01) with tau_choices 0.1 gets +-1.645 hypot(0.01, 0.01, 0.1)
+    # = +-0.166 at floor 0.01, not +-0.023 (draws' error about 0.005)
+    fr = study_module("floor_rule")
+    entry = _floor_score("ms00", 0.5, 0.5, direct_sun=False)["perez"]
+    entry["model_error"] = {"facets": 6, "choices_sd": 0.1}
+    q = fr.with_floor(entry, 0.01, np.random.default_rng(0))
+    assert abs(np.ptp(q["hdi90"]) - 2 * 1.645 * np.sqrt(0.01**2 + 0.01**2 + 0.1**2)) < 0.01
+
+
 def test_floor_rule_reads_holdout25_and_mitsuba12_as_stop_63_decided():
     # stop 62's rule on the default's committed scores: the few-facet floor
     # 0.13 holds 10 of the 11 sun-lit few-facet objects (the default 9),
