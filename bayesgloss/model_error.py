@@ -198,6 +198,15 @@ def choice_spread(draws: dict, weights: dict, rng: np.random.Generator) -> dict:
         weighted mixture of the choices' posteriors (as many as the first
         choice has), whose 90 % interval says what the data tell of gamma
         with the choice unknown.
+
+    Notes
+    -----
+    The mixture is drawn with replacement from each choice's pooled draws,
+    whatever their shape: only its quantiles are read. Where a mixture
+    must stay a posterior (chains kept, draws of several variables kept
+    together), :func:`bayesgloss.sky_families.mixture_draws` draws it
+    instead; the two are not interchangeable without moving the flag's
+    quantiles in their last digits (stop 70's review).
     """
     labels = [k for k in draws if weights.get(k, 0.0) > 0]
     w = np.array([weights[k] for k in labels], float)
