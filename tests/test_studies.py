@@ -1011,3 +1011,21 @@ def test_forward_check_mitsuba_scan_finds_the_gamma_that_made_the_curves():
     assert scan["in-lobe"]["object_sd"] < 1e-9
     assert abs(scan["none"]["gamma"] - 0.30) >= 0.02
     assert scan["none"]["object_sd"] > 1e-3
+
+
+def test_light_trends_residual_sd_removes_the_line_and_nothing_else():
+    # stop 71's light_trends: a frame's log sun exactly linear in air mass
+    # leaves no residual (to rounding); alternating +-0.1 about a line over
+    # 8 frames leaves what a line cannot take from the alternation, sd about
+    # 0.11 (ddof 2: the line's two coefficients; the exact value recomputed
+    # here); fewer than 4 frames give NaN
+    lt = study_module("light_trends")
+    x = np.linspace(1.0, 4.0, 8)
+    assert lt.residual_sd(0.3 - 0.05 * x, x) < 1e-12
+    wiggle = 0.1 * np.array([1, -1] * 4)
+    got = lt.residual_sd(0.3 - 0.05 * x + wiggle, x)
+    design = np.column_stack([np.ones_like(x), x])
+    left = wiggle - design @ np.linalg.lstsq(design, wiggle, rcond=None)[0]
+    assert got == pytest.approx(np.sqrt(np.sum(left**2) / 6), rel=1e-12)
+    assert 0.09 < got < 0.12
+    assert np.isnan(lt.residual_sd(x[:3], x[:3]))
