@@ -159,6 +159,14 @@ def decide(default: dict, candidate: dict, by_renderer: dict) -> dict:
     return out
 
 
+def _add_condition(decision: dict, name: str, ok: bool) -> None:
+    """Add condition ``name`` to a :func:`decide` result, before its ``met``,
+    and fold it into ``met``."""
+    met = decision.pop("met")
+    decision[name] = bool(ok)
+    decision["met"] = met and decision[name]
+
+
 def apply_rule(
     sets: dict[str, list[dict]],
     floor: float = CANDIDATE_FLOOR,
@@ -194,15 +202,11 @@ def apply_rule(
     decision = decide(pooled["default"], pooled["candidate"], by_renderer)
     if few_facets_floor is not None:  # stop 62's rule adds (5)
         few = by_group.get("few", {}).get("candidate", {}).get("median_width")
-        met = decision.pop("met")  # (5) goes before it
-        decision[FIVE] = bool(few is not None and few <= FEW_WIDTH_MAX)
-        decision["met"] = met and decision[FIVE]
+        _add_condition(decision, FIVE, few is not None and few <= FEW_WIDTH_MAX)
     if more_facets_min is not None:  # stop 71's rule adds (6)
         more = by_group.get("more", {}).get("candidate", {}).get("coverage")
-        met = decision.pop("met")
         six = f"(6) objects of more facets: pooled coverage at least {more_facets_min:.0%}"
-        decision[six] = bool(more is not None and more >= more_facets_min)
-        decision["met"] = met and decision[six]
+        _add_condition(decision, six, more is not None and more >= more_facets_min)
     return {
         "floor": floor,
         "few_facets_floor": few_facets_floor,

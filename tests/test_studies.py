@@ -683,9 +683,9 @@ def test_floor_rule_chooses_the_smallest_floor_for_more_facets_holding_90_percen
     # stop 71's chooser: posteriors N(0.5, 0.01) of 4-facet objects whose
     # facets agree, so the model error is the floor alone and a floor f
     # gives a 90 % interval of about +-1.645 hypot(f, 0.01): +-0.0233 at
-    # 0.01 and +-0.0297 at 0.015. Truths
-    # 0.027 away are missed at 0.01 and held at 0.015 (0.003 either side
-    # of the bounds; the seeded draws move them by about 0.001). With 9 of
+    # 0.01 and +-0.0297 at 0.015. Truths 0.027 away are missed at 0.01 and
+    # held at 0.015 (0.003 either side of the bounds; the seeded draws move
+    # them by about 0.001). With 9 of
     # 10 such objects in the broad pool held at any floor and the tenth
     # 0.027 away, the broad pool reaches 90 % at 0; the current pool (the
     # same plus one more 0.027 away: 9 of 11 held until 0.015) decides, so
