@@ -40,20 +40,12 @@ no facet has them (every frame at night, a single frame, every pixel
 saturated) is rejected with :class:`bayesgloss.bundle.NoUsableData`, which
 says how many frames have the sun up and how many entries saturate.
 
-The reported gamma of the object and of each facet carries the model's
-error of the material's gloss (:mod:`bayesgloss.model_error`: the facets'
-disagreement and a floor measured on renders); the model's own posterior
-is beside it as ``gamma_within_model`` (the one SBC checks), and the
-object's draws with the error are ``gamma_material`` in the InferenceData.
-
-Flags of the summary: a facet ``not-converged``, ``gloss-not-identifiable``
-(the model's own 90 % interval wider than :data:`NOT_IDENTIFIABLE_WIDTH`:
-what the data tell, the model's error aside; for the object also where Phong
-answered a sunless day alone and the lobe families' mixture is that wide:
-``lobe_mixture_gamma``, :func:`bayesgloss.lobe_families.sunless_spread_of`),
-``mostly-saturated`` (more than half its usable entries are lower bounds),
-or, left out, ``too-few-frames`` or ``saturated`` (too few measured
-entries); the object the same, ``mostly-saturated`` over the facets used.
+The summary (:func:`bayesgloss.summary.summarise_estimate`) reports the
+gamma of the object and of each facet with the model's error of the
+material's gloss, the model's own posterior beside it as
+``gamma_within_model``, and its flags (``not-converged``,
+``gloss-not-identifiable``, ``mostly-saturated``; a facet left out
+``too-few-frames``, ``saturated`` or ``faces-ground``).
 
 :func:`estimate_unit` is one bundle's estimate as files
 (:func:`result_files`), the unit of work that
@@ -65,40 +57,29 @@ entries); the object the same, ``mostly-saturated`` over the facets used.
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 
 from . import bundle as bundle_io
-from . import diagnostics, lobe_families, sky_families
-from . import likelihood as lk
+from . import lobe_families, sky_families
 from .facets_estimate import ILLUMINATION_MODELS, bundle_bases, facets_fit, to_inference_data
 from .fresnel import check_fresnel_model
 from .ground_facing import DEFAULT_GROUND_FACING, leave_out_ground_facing
-from .intervals import GAMMA_BOUNDS, reported_width
-from .intervals import posterior_quantiles as _quantiles
 from .irradiance import measured_sky
 from .joint_estimate import (
     DEFAULT_CLIPPED,
     DEFAULT_FRESNEL,
     bundle_sky,
     check_clipped,
-    frame_summary,
     ground_of,
     joint_fit,
-    object_convergence,
-    sky_model_summary,
-    sun_flags,
 )
-from .model_error import model_error_sd, with_model_error
 from .object_shadow import check_ground_shadow, convex_shadow_state, default_ground_shadow
 from .occluder_albedo import (
     DEFAULT_OCCLUDER_ALBEDO,
     check_occluder_albedo_mode,
     fit_occluder_albedos,
 )
-from .pooling import population_gloss, shared_gloss
-from .render import OCCLUDER_REFLECTANCE
 from .results import (
     RESULT_FILES,
     EstimateResult,
@@ -107,6 +88,7 @@ from .results import (
     result_files,
     write_result,
 )
+from .summary import MODEL_ERROR_STREAM, NOT_IDENTIFIABLE_WIDTH, summarise_estimate
 from .visibility import shadow_flags
 
 __all__ = [
@@ -117,6 +99,8 @@ __all__ = [
     "read_result",
     "ILLUMINATION_MODELS",
     "MIN_FRAMES",
+    "NOT_IDENTIFIABLE_WIDTH",
+    "MODEL_ERROR_STREAM",
     "estimate_unit",
     "default_illumination",
     "bundle_bases",
@@ -169,15 +153,6 @@ def observations(curves) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     usable = curves.valid | censored
     y = np.where(censored, curves.lower_bound, curves.luminance)
     return np.where(usable, y, 0.0), usable, censored
-
-
-#: The posterior of gamma of a facet or object is "not identifiable" when its
-#: 90 % interval is wider than this (the prior's is 0.9).
-NOT_IDENTIFIABLE_WIDTH = 0.6
-
-#: The random stream of the model error's draws (with the run's seed:
-#: ``default_rng([seed, MODEL_ERROR_STREAM])``), apart from the samplers'.
-MODEL_ERROR_STREAM = 7
 
 
 def _camera(b, camera: str) -> str:
@@ -428,8 +403,11 @@ def estimate_bundle(
             if not per_frame
             else "facets (per-frame illumination needs relative noise and a known pixel response)",
         }
-    out = _summarise(
-        b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing
+    out = summarise_estimate(
+        *(b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing),
+        usable=usable,
+        censored=censored,
+        min_frames=MIN_FRAMES,
     )
     if shadow_state == "not-built":  # one wall seen, or parallel walls only
         out.summary["object"]["flags"].append("ground-shadow-not-built")
@@ -441,139 +419,6 @@ def estimate_bundle(
         if not info["stacked"]:  # the default choice alone (fit_stacked: why)
             out.summary["object"]["flags"].append(f"{what.replace(' ', '-')}-not-stacked")
     return out
-
-
-def _summarise(
-    b, curves, keep, idata, samples, illumination, noise, camera, seed, used, run, facing=None
-):
-    """The summary of an estimate and its result; ``facing``: the facets left
-    out as facing the ground (:mod:`bayesgloss.ground_facing`)."""
-    ids = curves.ids[keep]
-    diag = diagnostics.gamma_convergence(idata, getattr(samples, "facets", None))
-    data_priors = lk.Priors()
-
-    gam = idata.posterior["gamma"].values  # (E, S, F)
-    per_facet = gam.transpose(2, 0, 1).reshape(len(ids), -1)
-    _, usable, censored = observations(curves)
-    # kept facets whose usable entries are mostly lower bounds
-    mostly_saturated = censored[keep].sum(1) > 0.5 * usable[keep].sum(1)
-    # the model's error of the material's gloss (bayesgloss.model_error): the facets'
-    # disagreement, the floor no disagreement shows and, where Phong answered a
-    # sunless day alone, the other lobe families' spread
-    lobes = lobe_families.sunless_spread_of(idata.posterior) or {"sd": 0.0, "mixture": None}
-    error = model_error_sd(per_facet.mean(axis=1), per_facet.std(axis=1), choices_sd=lobes["sd"])
-    rng = np.random.default_rng([seed, MODEL_ERROR_STREAM])
-    facets = []
-    for k, fid in enumerate(ids):
-        flags = [] if diag["converged"][k] else ["not-converged"]
-        within = _quantiles(per_facet[k], GAMMA_BOUNDS)
-        gq = _quantiles(with_model_error(per_facet[k], error["sd"], rng), GAMMA_BOUNDS)
-        if reported_width(within) > NOT_IDENTIFIABLE_WIDTH:  # the data, not the model error
-            flags.append("gloss-not-identifiable")
-        if mostly_saturated[k]:
-            flags.append("mostly-saturated")
-        facets.append(
-            {
-                "id": int(fid),
-                "gamma": gq,
-                "gamma_within_model": within,
-                "n": _quantiles(idata.posterior["n"].values[..., k]),
-                "converged": bool(diag["converged"][k]),
-                "rhat": float(diag["rhat"][k]),
-                "ess_bulk": float(diag["ess_bulk"][k]),
-                "ess_tail": float(diag["ess_tail"][k]),
-                "flags": flags,
-            }
-        )
-    for k in np.flatnonzero(~keep):
-        short = usable[k].sum() < MIN_FRAMES  # else too few measured: saturated
-        reason = "too-few-frames" if short else "saturated"
-        if facing is not None and facing[k]:
-            reason = "faces-ground"
-        facets.append(
-            {"id": int(curves.ids[k]), "gamma": None, "converged": False, "flags": [reason]}
-        )
-    conv = diag["converged"]
-    use = conv if conv.sum() >= 2 else np.ones(len(conv), dtype=bool)
-    pop = population_gloss(per_facet[use], ess=diag["ess_bulk"][use], seed=seed)
-    logn = np.log(idata.posterior["n"].values).transpose(2, 0, 1).reshape(len(ids), -1)
-    shared = shared_gloss(
-        np.stack([per_facet, logn], axis=-1)[conv if conv.sum() else slice(None)], data_priors
-    )
-    if "gamma_object" in idata.posterior:  # the one-material model's own answer
-        object_draws = idata.posterior["gamma_object"].values
-        obj_converged = bool(samples.converged) and len(ids) > 0
-        model = "one material (shared gamma and n, hierarchical albedo, per-frame light)"
-    else:
-        object_draws = np.asarray(pop["mu"])
-        obj_converged = bool(np.all(conv)) and len(ids) > 0
-        model = "population (hierarchical Beta)"
-    obj_within = _quantiles(object_draws, GAMMA_BOUNDS)
-    material = with_model_error(object_draws, error["sd"], rng)
-    obj_q = _quantiles(material, GAMMA_BOUNDS)
-    if "gamma_object" in idata.posterior:
-        idata.posterior["gamma_material"] = (("chain", "draw"), material)
-    obj_flags = [] if obj_converged else ["not-converged"]
-    if censored[keep].sum() > 0.5 * usable[keep].sum():  # mostly lower bounds
-        obj_flags.append("mostly-saturated")
-    # what the data tell; where Phong answered alone, with the lobe's family unknown
-    widths = [reported_width(q) for q in (obj_within, lobes["mixture"]) if q is not None]
-    if max(widths) > NOT_IDENTIFIABLE_WIDTH:
-        obj_flags.append("gloss-not-identifiable")
-    summary = {
-        "object": {
-            "gamma": obj_q,
-            "gamma_within_model": obj_within,
-            "model_error": error,
-            "flags": obj_flags,
-            "n": {"median": shared["n_median"]},
-            "converged": obj_converged,
-            "model": model,
-            "facet_population_gamma": _quantiles(pop["mu"], GAMMA_BOUNDS),
-            "shared_material_gamma": {k: shared[k] for k in ("median", "q05", "q95")},
-            "lobe_mixture_gamma": lobes["mixture"],
-            "mean_of_facet_medians": float(np.mean(np.median(per_facet, axis=1))),
-            "facets_converged": int(conv.sum()),
-            "facets": int(len(ids)),
-        },
-        "facets": facets,
-        "illumination": illumination,
-        "noise": noise,
-        "camera": camera,
-        "unit": curves.unit,
-        "bundle": str(Path(b.path).resolve()),
-        "bundle_content": bundle_io.bundle_digest(b),
-        "sampler": run,
-        "per_frame_illumination": used is not None,
-    }
-    if used is not None:
-        summary["frames"] = frame_summary(idata, b, used, samples)
-        summary["object"]["sun_unidentified_share"], flags = sun_flags(idata)
-        summary["object"]["flags"] += flags
-        summary["object"]["convergence"] = object_convergence(samples, used)
-        summary["sky_models"] = sky_model_summary(idata)
-        post = idata.posterior
-        summary["object"]["n"] = _quantiles(post["n_object"].values)
-        # the day-level spreads, the Fresnel raise's unknowns, the family's roughness
-        for name in ("albedo_spread", "exposure_spread", "fresnel_strength", "normal_albedo"):
-            if name in post:
-                summary["object"][name] = _quantiles(post[name].values)
-        summary["fresnel"] = post.attrs.get("fresnel", "none")
-        summary["lobe_family"] = post.attrs.get(
-            "lobe_family_most_weight", post.attrs.get("lobe_family", "phong")
-        )
-        if b.has_mesh:  # its faces' albedo: the most-weighted, or fixed
-            summary["occluder_albedo"] = float(
-                post.attrs.get(
-                    "occluder_albedo_most_weight",
-                    post.attrs.get("occluder_albedo", OCCLUDER_REFLECTANCE),
-                )
-            )
-        if "roughness_object" in post:
-            summary["object"]["roughness"] = _quantiles(post["roughness_object"].values)
-        states = post["sun_state_weight"].values.mean(axis=(0, 1)).tolist()
-        summary["sun_state"] = dict(zip(post["sun_state"].values.tolist(), states, strict=True))
-    return EstimateResult(idata, summary, samples)
 
 
 def estimate_unit(
