@@ -1029,3 +1029,27 @@ def test_light_trends_residual_sd_removes_the_line_and_nothing_else():
     assert got == pytest.approx(np.sqrt(np.sum(left**2) / 6), rel=1e-12)
     assert 0.09 < got < 0.12
     assert np.isnan(lt.residual_sd(x[:3], x[:3]))
+
+
+def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
+    # two made-up rows: the default holds the first and misses the second
+    # (0.30 outside [0.40, 0.90]); the probe the opposite. The table must
+    # star exactly the misses and give each column's MAE and hold.
+    study = study_module("probe_seen_boxes")
+    rows = [
+        {"sequence": "a:ms01", "facets": 3, "truth": 0.20,
+         "default": {"median": 0.25, "hdi90": [0.10, 0.40]},
+         "probe": {"median": 0.60, "hdi90": [0.50, 0.70]}},
+        {"sequence": "a:ms02", "facets": 2, "truth": 0.30,
+         "default": {"median": 0.60, "hdi90": [0.40, 0.90]},
+         "probe": {"median": 0.32, "hdi90": [0.10, 0.50]}},
+    ]  # fmt: skip
+    lines = study.table(rows).splitlines()
+    assert lines[2].count("*") == 1 and "0.600 [0.50, 0.70]*" in lines[2]
+    assert lines[3].count("*") == 1 and "0.600 [0.40, 0.90]*" in lines[3]
+    # MAE: default (0.05 + 0.30) / 2 = 0.175, probe (0.40 + 0.02) / 2 = 0.210
+    assert lines[4] == "| MAE, held | | | 0.175, 1/2 | 0.210, 1/2 |"
+    assert study.interval({"q05": 0.1, "q95": 0.2}) == (0.1, 0.2)
+    # a prefix that names no bundle is one clear error, not a traceback
+    with pytest.raises(SystemExit, match="0 bundles ms99"):
+        study.bundle_of("no_such_set", "ms99")

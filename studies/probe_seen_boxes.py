@@ -1,0 +1,147 @@
+"""Probe: single fits of seen sequences against the default's committed answers.
+
+A candidate's first look at renders (not a holdout: every sequence here is
+of a set already scored and read). Each sequence is fitted once with
+``estimate``'s defaults by whatever code is imported (a candidate's
+worktree with ``PYTHONPATH=<worktree>``), and its object's answer is
+appended to a JSON-lines file beside the truth and the default's answer
+from ``results/validation_<set>.json``; sequences already in the file are
+skipped, so a stopped run resumes. The table printed at the end has the
+reported interval of each and ``*`` where it misses the truth. The
+committed answers are the default's that scored each set (for Mitsuba
+holdouts 13 and 14, stop 63's and 66's; the default's changes since act
+on sunless days only).
+
+The default list is stop 68's nine sun-lit Mitsuba boxes of Mitsuba
+holdouts 13 and 14 and its four many-facet controls (``studies/README.md``,
+"Stop 68: Mitsuba's plastic boxes", and "Stop 72: the day's light built");
+their bundles must be in ``studies/out/<set>/bundles`` (render a set again
+from its committed config: ``mitsuba_set.py --config
+studies/configs/<set>.json --cache studies/out/<set>/bundles --manifest
+studies/results/<set>.json --threads 2``).
+
+Usage: PYTHONPATH=<worktree> python studies/probe_seen_boxes.py --name day-light
+       [--out studies/out/probe_day_light.jsonl] [SET:msNN ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+#: stop 68's nine sun-lit boxes, then its four many-facet controls
+STOP68 = (
+    "mitsuba_holdout13:ms03", "mitsuba_holdout13:ms05", "mitsuba_holdout13:ms07",
+    "mitsuba_holdout13:ms14", "mitsuba_holdout13:ms18", "mitsuba_holdout14:ms02",
+    "mitsuba_holdout14:ms09", "mitsuba_holdout14:ms15", "mitsuba_holdout14:ms17",
+    "mitsuba_holdout14:ms06", "mitsuba_holdout14:ms19", "mitsuba_holdout14:ms22",
+    "mitsuba_holdout13:ms11",
+)  # fmt: skip
+
+
+def committed(set_name: str) -> dict:
+    """The set's committed scores by bundle name (``results/validation_<set>.json``)."""
+    path = HERE / "results" / f"validation_{set_name}.json"
+    return {s["bundle"]: s for s in json.loads(path.read_text())["sequences"]}
+
+
+def bundle_of(set_name: str, prefix: str) -> Path:
+    """The bundle of ``set_name`` whose name starts with ``prefix`` (msNN)."""
+    found = sorted((HERE / "out" / set_name / "bundles").glob(f"{prefix}-*"))
+    if len(found) != 1:
+        raise SystemExit(
+            f"probe: {len(found)} bundles {prefix}-* in studies/out/{set_name}/bundles "
+            "(render the set again from its committed config)"
+        )
+    return found[0]
+
+
+def interval(answer: dict) -> tuple[float, float]:
+    """A summary's reported 90 % interval (``hdi90``, or the quantiles)."""
+    return tuple(answer.get("hdi90") or (answer["q05"], answer["q95"]))
+
+
+def fit(path: Path, seed: int) -> dict:
+    """One ``estimate`` with its defaults: the object's answer and the run's seconds."""
+    from bayesgloss import estimate
+
+    t0 = time.time()
+    res = estimate.estimate_bundle(str(path), seed=seed, jobs=2)
+    obj = res.summary["object"]
+    return {
+        "median": obj["gamma"]["median"],
+        "hdi90": list(interval(obj["gamma"])),
+        "within_model": obj["gamma_within_model"]["median"],
+        "flags": obj["flags"],
+        "facets": obj["facets"],
+        "day_light": res.summary.get("day_light"),
+        "seconds": time.time() - t0,
+    }
+
+
+def table(rows: list[dict]) -> str:
+    """The probe's rows against the default's answers, and their MAE and hold."""
+    lines = ["| sequence | facets | truth | default | probe |", "|---|---|---|---|---|"]
+    errs = {"default": [], "probe": []}
+    held = {"default": 0, "probe": 0}
+    for r in rows:
+        cells = []
+        for who in ("default", "probe"):
+            lo, hi = r[who]["hdi90"]
+            miss = not lo <= r["truth"] <= hi
+            errs[who].append(abs(r[who]["median"] - r["truth"]))
+            held[who] += not miss
+            cells.append(f"{r[who]['median']:.3f} [{lo:.2f}, {hi:.2f}]{'*' * miss}")
+        head = f"| {r['sequence']} | {r['facets']} | {r['truth']:.3f}"
+        lines.append(f"{head} | {' | '.join(cells)} |")
+    n = len(rows)
+    lines.append(
+        f"| MAE, held | | | {np.mean(errs['default']):.3f}, {held['default']}/{n} | "
+        f"{np.mean(errs['probe']):.3f}, {held['probe']}/{n} |"
+    )
+    return "\n".join(lines)
+
+
+def main(argv=None) -> list[dict]:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sequences", nargs="*", default=list(STOP68), help="SET:msNN")
+    ap.add_argument("--name", required=True, help="what is probed (recorded)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=None, help="JSON lines (default studies/out/probe_NAME.jsonl)")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    out = Path(args.out or HERE / "out" / f"probe_{args.name}.jsonl")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = [json.loads(x) for x in out.read_text().splitlines()] if out.exists() else []
+    seen = {r["sequence"] for r in done}
+    for item in args.sequences:
+        set_name, prefix = item.split(":")
+        if item in seen:
+            continue
+        path = bundle_of(set_name, prefix)
+        default = committed(set_name)[path.name]
+        row = {
+            "sequence": item,
+            "bundle": path.name,
+            "probe_name": args.name,
+            "truth": default["truth"],
+            "facets": default["facets"],
+            "default": {"median": default["perez"]["median"], "hdi90": interval(default["perez"])},
+            "probe": fit(path, args.seed),
+        }
+        with out.open("a") as f:
+            f.write(json.dumps(row) + "\n")
+        done.append(row)
+        print(item, row["probe"]["median"], flush=True)
+    print(table(done))
+    return done
+
+
+if __name__ == "__main__":
+    main()
