@@ -27,12 +27,15 @@ Usage: PYTHONPATH=<worktree> python studies/probe_seen_boxes.py --name day-light
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+
+from bayesgloss.intervals import reported_interval
 
 HERE = Path(__file__).resolve().parent
 #: stop 68's nine sun-lit boxes, then its four many-facet controls
@@ -45,8 +48,10 @@ STOP68 = (
 )  # fmt: skip
 
 
+@functools.cache
 def committed(set_name: str) -> dict:
-    """The set's committed scores by bundle name (``results/validation_<set>.json``)."""
+    """The set's committed scores by bundle name (``results/validation_<set>.json``),
+    read once a run."""
     path = HERE / "results" / f"validation_{set_name}.json"
     return {s["bundle"]: s for s in json.loads(path.read_text())["sequences"]}
 
@@ -62,11 +67,6 @@ def bundle_of(set_name: str, prefix: str) -> Path:
     return found[0]
 
 
-def interval(answer: dict) -> tuple[float, float]:
-    """A summary's reported 90 % interval (``hdi90``, or the quantiles)."""
-    return tuple(answer.get("hdi90") or (answer["q05"], answer["q95"]))
-
-
 def fit(path: Path, seed: int) -> dict:
     """One ``estimate`` with its defaults: the object's answer and the run's seconds."""
     from bayesgloss import estimate
@@ -76,7 +76,7 @@ def fit(path: Path, seed: int) -> dict:
     obj = res.summary["object"]
     return {
         "median": obj["gamma"]["median"],
-        "hdi90": list(interval(obj["gamma"])),
+        "hdi90": list(reported_interval(obj["gamma"])),
         "within_model": obj["gamma_within_model"]["median"],
         "flags": obj["flags"],
         "facets": obj["facets"],
@@ -126,13 +126,14 @@ def main(argv=None) -> list[dict]:
             continue
         path = bundle_of(set_name, prefix)
         default = committed(set_name)[path.name]
+        answer = default["perez"]
         row = {
             "sequence": item,
             "bundle": path.name,
             "probe_name": args.name,
             "truth": default["truth"],
             "facets": default["facets"],
-            "default": {"median": default["perez"]["median"], "hdi90": interval(default["perez"])},
+            "default": {"median": answer["median"], "hdi90": reported_interval(answer)},
             "probe": fit(path, args.seed),
         }
         with out.open("a") as f:

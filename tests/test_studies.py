@@ -1049,7 +1049,7 @@ def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
     assert lines[3].count("*") == 1 and "0.600 [0.40, 0.90]*" in lines[3]
     # MAE: default (0.05 + 0.30) / 2 = 0.175, probe (0.40 + 0.02) / 2 = 0.210
     assert lines[4] == "| MAE, held | | | 0.175, 1/2 | 0.210, 1/2 |"
-    assert study.interval({"q05": 0.1, "q95": 0.2}) == (0.1, 0.2)
+    assert study.reported_interval({"q05": 0.1, "q95": 0.2}) == (0.1, 0.2)
     # a prefix that names no bundle is one clear error, not a traceback
     with pytest.raises(SystemExit, match="0 bundles ms99"):
         study.bundle_of("no_such_set", "ms99")
