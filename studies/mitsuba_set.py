@@ -33,7 +33,7 @@ the fraction of the reflected energy in the specular part at normal
 incidence from Mitsuba's own BSDF integrated numerically.
 
 Usage: python studies/mitsuba_set.py [--draw-only] [--threads 2] [--cache DIR]
-[--manifest FILE] [--no-noise-check]
+[--manifest FILE] [--no-noise-check] [--only msNN ...]
 """
 
 from __future__ import annotations
@@ -268,6 +268,19 @@ def noise_check(items, cfg: dict, threads: int) -> dict:
     }
 
 
+def render_only(items, prefixes, cache: Path, threads: int) -> list[Path]:
+    """Render the sequences of ``items`` whose names start with one of
+    ``prefixes`` (msNN) into ``cache``: the same draws and bundle keys as the
+    whole set's, for a probe that needs a few of a set's sequences."""
+    wanted = [s for s in items if s.config.name.split("-")[0] in set(prefixes)]
+    missing = set(prefixes) - {s.config.name.split("-")[0] for s in wanted}
+    if missing:
+        raise SystemExit(f"mitsuba_set: no sequence {', '.join(sorted(missing))} in the config")
+    paths = mr.render_bundles(wanted, cache, threads=threads)
+    print(f"{len(paths)} bundles in {cache}")
+    return paths
+
+
 def main(argv=None) -> list[Path]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default=str(CONFIG))
@@ -276,9 +289,17 @@ def main(argv=None) -> list[Path]:
     ap.add_argument("--threads", type=int, default=2, help="Mitsuba threads (default 2)")
     ap.add_argument("--draw-only", action="store_true", help="write the manifest, render nothing")
     ap.add_argument("--no-noise-check", action="store_true")
+    ap.add_argument(
+        "--only",
+        nargs="+",
+        metavar="msNN",
+        help="render these sequences of the set alone (a probe's), leaving the manifest as it is",
+    )
     args = ap.parse_args(argv)
     cfg = load_config(args.config)
     items = draw_sequences(cfg)
+    if args.only:
+        return render_only(items, args.only, Path(args.cache).resolve(), args.threads)
     cache = Path(args.cache).resolve()
     out = Path(args.manifest)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -15,10 +15,11 @@ on sunless days only).
 The default list is stop 68's nine sun-lit Mitsuba boxes of Mitsuba
 holdouts 13 and 14 and its four many-facet controls (``studies/README.md``,
 "Stop 68: Mitsuba's plastic boxes", and "Stop 72: the day's light built");
-their bundles must be in ``studies/out/<set>/bundles`` (render a set again
-from its committed config: ``mitsuba_set.py --config
-studies/configs/<set>.json --cache studies/out/<set>/bundles --manifest
-studies/results/<set>.json --threads 2``).
+their bundles must be in ``studies/out/<set>/bundles`` (render the
+probe's sequences of a set again from its committed config, with the
+set's keys: ``mitsuba_set.py --config studies/configs/<set>.json --cache
+studies/out/<set>/bundles --only msNN ...``, about 2 min a sequence on
+two threads).
 
 Usage: PYTHONPATH=<worktree> python studies/probe_seen_boxes.py --name day-light
        [--out studies/out/probe_day_light.jsonl] [SET:msNN ...]

@@ -1053,3 +1053,28 @@ def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
     # a prefix that names no bundle is one clear error, not a traceback
     with pytest.raises(SystemExit, match="0 bundles ms99"):
         study.bundle_of("no_such_set", "ms99")
+
+
+def test_mitsuba_set_renders_only_the_named_sequences_with_the_sets_keys(monkeypatch, tmp_path):
+    # --only must render the same draws (same bundle keys) as the whole set,
+    # so a probe's bundles are the set's; a name not in the set is an error.
+    module = study_module("mitsuba_set")
+    cfg = module.load_config(STUDIES / "configs" / "mitsuba_holdout13.json")
+    every = {s.config.name: s.key() for s in module.draw_sequences(cfg)}
+    seen = []
+    monkeypatch.setattr(
+        module.mr, "render_bundles", lambda items, cache, threads: seen.extend(items) or []
+    )
+    argv = [
+        "--config",
+        str(STUDIES / "configs" / "mitsuba_holdout13.json"),
+        "--cache",
+        str(tmp_path),
+    ]
+    module.main([*argv, "--only", "ms03", "ms14"])
+    assert [(s.config.name, s.key()) for s in seen] == [
+        (n, k) for n, k in every.items() if n.startswith(("ms03-", "ms14-"))
+    ]
+    assert len(seen) == 2
+    with pytest.raises(SystemExit, match="ms99"):
+        module.main([*argv, "--only", "ms99"])
