@@ -797,6 +797,40 @@ def test_floor_rule_reads_mitsuba_holdout9_as_stop_56_decided():
     assert not out["decision"]["met"]
 
 
+def test_floor_rule_reads_holdout30_and_mitsuba16_as_stop_73_decided():
+    # stop 71's rule on the default's committed scores: the floor 0.01 for
+    # objects of more than 3 facets holds 23 of their 27 sun-lit (condition
+    # 6 met at 85 %) but Radiance's 11 of 14 of them, so Radiance over all
+    # sun-lit falls from 18 to 15 of 19 (0.79, out of the band and farther
+    # from 0.90), the pool to 30 of 37 (0.81 < 0.85) and the confident
+    # misses rise from 2 to 6 (> 10 %); the few-facet objects, which the
+    # candidate leaves alone, are 0.54 wide (condition 5). Not met.
+    fr = study_module("floor_rule")
+    sets = {
+        n: fr.load_scores(n, cached=False) for n in ("validation_holdout30", "mitsuba_holdout16")
+    }
+    out = fr.apply_rule(sets, 0.01, few_facets_floor=0.13, more_facets_min=0.85)
+    more = out["by_facet_group"]["more"]
+    assert (more["default"]["held"], more["candidate"]["held"], more["candidate"]["sun_lit"]) == (
+        27,
+        23,
+        27,
+    )
+    r, m = (out["by_renderer"][k] for k in ("radiance", "mitsuba"))
+    assert (r["default"]["held"], r["candidate"]["held"], r["candidate"]["sun_lit"]) == (18, 15, 19)
+    assert (m["default"]["held"], m["candidate"]["held"], m["candidate"]["sun_lit"]) == (16, 15, 18)
+    pooled = out["pooled"]
+    assert (pooled["default"]["confident_misses"], pooled["candidate"]["confident_misses"]) == (
+        2,
+        6,
+    )
+    assert round(out["by_facet_group"]["few"]["candidate"]["median_width"], 2) == 0.54
+    decision = out["decision"]
+    assert decision["(6) objects of more facets: pooled coverage at least 85%"]
+    assert not decision["(2) pooled coverage at least 85 %"]
+    assert not decision["met"]
+
+
 def test_bench_tied_skies_times_only_objects_of_few_facets(tmp_path):
     # condition (e) of holdout 24's rule is about the objects whose sky
     # families tie: the benchmark picks bundles of 1-3 seen facets, in name
