@@ -51,9 +51,11 @@ STOP68 = (
 
 @functools.cache
 def committed(set_name: str) -> dict:
-    """The set's committed scores by bundle name (``results/validation_<set>.json``),
-    read once a run."""
-    path = HERE / "results" / f"validation_{set_name}.json"
+    """The set's committed scores by bundle name (``results/validation_<set>.json``
+    for a Mitsuba set, ``results/<set>.json`` for a Radiance one, whose name
+    starts with ``validation_``), read once a run."""
+    stem = set_name if set_name.startswith("validation_") else f"validation_{set_name}"
+    path = HERE / "results" / f"{stem}.json"
     return {s["bundle"]: s for s in json.loads(path.read_text())["sequences"]}
 
 

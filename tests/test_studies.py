@@ -1087,6 +1087,10 @@ def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
     # a prefix that names no bundle is one clear error, not a traceback
     with pytest.raises(SystemExit, match="0 bundles ms99"):
         study.bundle_of("no_such_set", "ms99")
+    # a Radiance set's committed scores are read by its own name, a Mitsuba
+    # set's with validation_ before it (each names its truth's sequences)
+    assert next(iter(study.committed("validation_holdout30"))).startswith("vs")
+    assert next(iter(study.committed("mitsuba_holdout16"))).startswith("ms")
 
 
 def test_mitsuba_set_renders_only_the_named_sequences_with_the_sets_keys(monkeypatch, tmp_path):
