@@ -272,10 +272,11 @@ def render_only(items, prefixes, cache: Path, threads: int) -> list[Path]:
     """Render the sequences of ``items`` whose names start with one of
     ``prefixes`` (msNN) into ``cache``: the same draws and bundle keys as the
     whole set's, for a probe that needs a few of a set's sequences."""
-    wanted = [s for s in items if s.config.name.split("-")[0] in set(prefixes)]
-    missing = set(prefixes) - {s.config.name.split("-")[0] for s in wanted}
+    by_prefix = {s.config.name.split("-")[0]: s for s in items}
+    missing = set(prefixes) - set(by_prefix)
     if missing:
         raise SystemExit(f"mitsuba_set: no sequence {', '.join(sorted(missing))} in the config")
+    wanted = [s for p, s in by_prefix.items() if p in set(prefixes)]  # the set's order
     paths = mr.render_bundles(wanted, cache, threads=threads)
     print(f"{len(paths)} bundles in {cache}")
     return paths
@@ -298,9 +299,9 @@ def main(argv=None) -> list[Path]:
     args = ap.parse_args(argv)
     cfg = load_config(args.config)
     items = draw_sequences(cfg)
-    if args.only:
-        return render_only(items, args.only, Path(args.cache).resolve(), args.threads)
     cache = Path(args.cache).resolve()
+    if args.only:
+        return render_only(items, args.only, cache, args.threads)
     out = Path(args.manifest)
     out.parent.mkdir(parents=True, exist_ok=True)
     old = json.loads(out.read_text()) if out.exists() else {}

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -39,6 +40,11 @@ import numpy as np
 from bayesgloss.intervals import reported_interval
 
 HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+from validate_radiance import SETS  # noqa: E402  (each set's committed results file)
+
 #: stop 68's nine sun-lit boxes, then its four many-facet controls
 STOP68 = (
     "mitsuba_holdout13:ms03", "mitsuba_holdout13:ms05", "mitsuba_holdout13:ms07",
@@ -51,11 +57,11 @@ STOP68 = (
 
 @functools.cache
 def committed(set_name: str) -> dict:
-    """The set's committed scores by bundle name (``results/validation_<set>.json``
-    for a Mitsuba set, ``results/<set>.json`` for a Radiance one, whose name
-    starts with ``validation_``), read once a run."""
-    stem = set_name if set_name.startswith("validation_") else f"validation_{set_name}"
-    path = HERE / "results" / f"{stem}.json"
+    """The set's committed scores by bundle name (``results/<file>.json``,
+    the file :data:`validate_radiance.SETS` names), read once a run."""
+    if set_name not in SETS:
+        raise SystemExit(f"probe: no set {set_name!r} (validate_radiance.SETS names the sets)")
+    path = HERE / "results" / f"{SETS[set_name]}.json"
     return {s["bundle"]: s for s in json.loads(path.read_text())["sequences"]}
 
 

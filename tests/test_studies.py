@@ -1087,10 +1087,13 @@ def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
     # a prefix that names no bundle is one clear error, not a traceback
     with pytest.raises(SystemExit, match="0 bundles ms99"):
         study.bundle_of("no_such_set", "ms99")
-    # a Radiance set's committed scores are read by its own name, a Mitsuba
-    # set's with validation_ before it (each names its truth's sequences)
+    # a Radiance set's committed scores and a Mitsuba set's are each read
+    # from the file validate_radiance.SETS names (their bundles vsNN, msNN);
+    # a set it does not name is one clear error
     assert next(iter(study.committed("validation_holdout30"))).startswith("vs")
     assert next(iter(study.committed("mitsuba_holdout16"))).startswith("ms")
+    with pytest.raises(SystemExit, match="no set 'holdout30'"):
+        study.committed("holdout30")
 
 
 def test_mitsuba_set_renders_only_the_named_sequences_with_the_sets_keys(monkeypatch, tmp_path):
