@@ -22,7 +22,10 @@ studies/out/<set>/bundles --only msNN ...``, about 2 min a sequence on
 two threads).
 
 Usage: PYTHONPATH=<worktree> python studies/probe_seen_boxes.py --name day-light
-       [--out studies/out/probe_day_light.jsonl] [SET:msNN ...]
+       [--out studies/out/probe_day_light.jsonl] [--options JSON] [SET:msNN ...]
+
+``--options`` passes keywords to ``estimate_bundle`` (a probe of one lobe,
+``'{"lobe": "ggx", "fresnel": "schlick-lobe"}'``) and is recorded per row.
 """
 
 from __future__ import annotations
@@ -76,12 +79,14 @@ def bundle_of(set_name: str, prefix: str) -> Path:
     return found[0]
 
 
-def fit(path: Path, seed: int) -> dict:
-    """One ``estimate`` with its defaults: the object's answer and the run's seconds."""
+def fit(path: Path, seed: int, options: dict | None = None) -> dict:
+    """One ``estimate`` with its defaults, or with ``options`` (keyword arguments
+    of :func:`bayesgloss.estimate.estimate_bundle`): the object's answer and the
+    run's seconds."""
     from bayesgloss import estimate
 
     t0 = time.time()
-    res = estimate.estimate_bundle(str(path), seed=seed, jobs=2)
+    res = estimate.estimate_bundle(str(path), seed=seed, jobs=2, **(options or {}))
     obj = res.summary["object"]
     return {
         "median": obj["gamma"]["median"],
@@ -122,6 +127,12 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("sequences", nargs="*", default=list(STOP68), help="SET:msNN")
     ap.add_argument("--name", required=True, help="what is probed (recorded)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--options",
+        type=json.loads,
+        default=None,
+        help="estimate_bundle's keywords as JSON, e.g. '{\"lobe\": \"ggx\"}'",
+    )
     ap.add_argument("--out", default=None, help="JSON lines (default studies/out/probe_NAME.jsonl)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
@@ -140,10 +151,11 @@ def main(argv=None) -> list[dict]:
             "sequence": item,
             "bundle": path.name,
             "probe_name": args.name,
+            "options": args.options,
             "truth": default["truth"],
             "facets": default["facets"],
             "default": {"median": answer["median"], "hdi90": reported_interval(answer)},
-            "probe": fit(path, args.seed),
+            "probe": fit(path, args.seed, args.options),
         }
         with out.open("a") as f:
             f.write(json.dumps(row) + "\n")

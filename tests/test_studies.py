@@ -1096,6 +1096,39 @@ def test_probe_seen_boxes_tables_its_rows_against_the_default(tmp_path):
         study.committed("holdout30")
 
 
+def test_probe_seen_boxes_passes_its_options_to_the_fit_and_records_them(monkeypatch, tmp_path):
+    # --options is JSON of estimate_bundle's keywords: each fit must get them
+    # as given, each row must record them, and a row already in the file is
+    # not fitted again (a stopped run resumes).
+    study = study_module("probe_seen_boxes")
+    got = []
+    monkeypatch.setattr(study, "bundle_of", lambda s, p: Path(f"{s}/{p}-abc"))
+    monkeypatch.setattr(
+        study,
+        "committed",
+        lambda s: {
+            f"{p}-abc": {
+                "truth": 0.3,
+                "facets": 3,
+                "perez": {"median": 0.4, "q05": 0.1, "q95": 0.6},
+            }
+            for p in ("ms01", "ms02")
+        },
+    )
+    probe = {"median": 0.35, "hdi90": [0.2, 0.5]}
+    monkeypatch.setattr(
+        study, "fit", lambda path, seed, options: got.append((path.name, seed, options)) or probe
+    )
+    out = tmp_path / "probe.jsonl"
+    opts = {"lobe": "ggx", "fresnel": "schlick-lobe"}
+    argv = ["--name", "x", "--out", str(out), "--seed", "3", "--options", json.dumps(opts)]
+    study.main([*argv, "s:ms01"])
+    rows = study.main([*argv, "s:ms01", "s:ms02"])
+    assert got == [("ms01-abc", 3, opts), ("ms02-abc", 3, opts)]
+    assert [r["options"] for r in rows] == [opts, opts]
+    assert [json.loads(x)["sequence"] for x in out.read_text().splitlines()] == ["s:ms01", "s:ms02"]
+
+
 def test_mitsuba_set_renders_only_the_named_sequences_with_the_sets_keys(monkeypatch, tmp_path):
     # --only must render the same draws (same bundle keys) as the whole set,
     # so a probe's bundles are the set's; a name not in the set is an error.
