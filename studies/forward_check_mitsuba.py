@@ -40,6 +40,14 @@ told the light would read with no noise. ``--sequences SET/NAME ...``
 checks other seen sequences (stop 68: Mitsuba's plastic boxes).
 
     python studies/forward_check_mitsuba.py [--threads 2] [--sequences SET/NAME ...] [--json FILE]
+        [--lobe-scan]
+
+``--lobe-scan`` (stop 74) adds, per sequence, :func:`lobe_scan`: for each
+lobe the stack fits (Phong and GGX without Fresnel, GGX with the coating's
+rise in the lobe), the exponent and gamma whose prediction under the true
+light leaves the least spread, with one albedo for the object and with a
+free albedo per facet (the freedom the one-material model's hierarchical
+albedo gives a few-facet object).
 
 Renders go to ``studies/out/forward_check_mitsuba/bundles`` (cached),
 answers to ``studies/results/forward_check_mitsuba.json``. A development
@@ -67,6 +75,7 @@ from bayesgloss import bundle as bundle_io  # noqa: E402
 from bayesgloss import fresnel as fr  # noqa: E402
 from bayesgloss import illumination as il  # noqa: E402
 from bayesgloss import mitsuba_render as mr  # noqa: E402
+from bayesgloss import render  # noqa: E402
 from bayesgloss.object_shadow import averaged_bases, shadow_points  # noqa: E402
 
 CACHE = HERE / "out" / "forward_check_mitsuba" / "bundles"
@@ -92,6 +101,9 @@ SMOOTH_EXPONENT = 1.0e4
 MODELS = ("none", "view-rise", "in-lobe")
 #: gamma of the scan (:func:`gamma_scan`).
 GAMMA_GRID = np.linspace(0.0, 1.0, 101)
+#: The lobes of :func:`lobe_scan`: (lobe family, Fresnel model), as the
+#: lobe stack fits them (:data:`bayesgloss.lobe_families.MATERIAL_FAMILIES`).
+SCAN_LOBES = (("phong", "none"), ("ggx", "none"), ("ggx", "schlick-lobe"))
 
 
 def clean_sequence(set_name: str, name: str) -> mr.MitsubaSequence:
@@ -169,7 +181,81 @@ def gamma_scan(y, bases, albedo: float) -> dict:
     return out
 
 
-def check(path: Path, sequence: mr.MitsubaSequence) -> dict:
+def lobe_predictions(bases, albedo: float, fresnel: str, gamma) -> np.ndarray:
+    """Radiance of the facets (G, F, K, T) for each gamma of ``gamma`` (G,)
+    and each exponent K of ``bases``: the lobe without Fresnel, or with the
+    coating's rise inside it (``"schlick-lobe"``), Fresnel strength k = 1."""
+    gamma = np.asarray(gamma, float)[:, None, None, None]  # (G, 1, 1, 1)
+    terms = bases.fresnel
+    out = 0.0
+    for p in (0, 1):  # the sun, the sky
+        d = bases.diffuse[p][:, None, :]  # (F, 1, T)
+        g = bases.glossy[p]  # (F, K, T)
+        if fresnel == "none":
+            out = out + albedo * ((1 - gamma) * d + gamma * g)
+        else:
+            sun = terms.sun_direct if p == 0 else None
+            out = out + albedo * fr.fresnel_parts_in_lobe(
+                d, g, terms.glossy_rise[p], 1.0, np.log(albedo), terms.view, gamma, sun
+            )
+    return out
+
+
+def spread_one_and_per_facet(y, pred) -> tuple[np.ndarray, np.ndarray]:
+    """The sd of log(y / pred) over all entries about one common value (one
+    albedo and the exposure free) and about each facet's own value (a free
+    albedo per facet), for ``pred`` (..., F, T) against ``y`` (F, T); entries
+    where either is not positive are left out."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.log(y / pred)
+    r = np.where(np.isfinite(r), r, np.nan)
+    one = np.nanstd(r.reshape(*r.shape[:-2], -1), axis=-1)
+    per = np.sqrt(np.nanmean((r - np.nanmean(r, axis=-1, keepdims=True)) ** 2, axis=(-2, -1)))
+    return one, per
+
+
+def lobe_scan(y, bases_by_lobe: dict, albedo: float, exponents) -> dict:
+    """Per lobe of ``bases_by_lobe`` ((family, fresnel) -> bases tabulated on
+    ``exponents``), the exponent and gamma (:data:`GAMMA_GRID`) of least
+    spread with one albedo and with a free albedo per facet
+    (:func:`spread_one_and_per_facet`): what the curves under the true
+    light say of each lobe, before any light is inferred."""
+    out = {}
+    for (family, fresnel), bases in bases_by_lobe.items():
+        pred = lobe_predictions(bases, albedo, fresnel, GAMMA_GRID)  # (G, F, K, T)
+        one, per = spread_one_and_per_facet(y, np.moveaxis(pred, 2, 1))  # (G, K)
+        row = {}
+        for key, sd in (("one_albedo", one), ("albedo_per_facet", per)):
+            g, k = np.unravel_index(int(np.nanargmin(sd)), sd.shape)
+            row[key] = {
+                "gamma": float(GAMMA_GRID[g]),
+                "exponent": float(exponents[k]),
+                "sd": float(sd[g, k]),
+            }
+        out[f"{family}-{fresnel}"] = row
+    return out
+
+
+def scan_bases(b, checked, sequence: mr.MitsubaSequence, exponents) -> dict:
+    """The bases of :data:`SCAN_LOBES` under the true sky, as :func:`true_bases`."""
+    day = mr.frame_skies(sequence.config)
+    points, owner = shadow_points(b.facets, b.camera_position, which=checked)
+    out = {}
+    for family, fresnel in SCAN_LOBES:
+        bases = il.illumination_bases(
+            points,
+            day,
+            exponents=exponents,
+            lobe_family=family,
+            fresnel="schlick-lobe" if family == "ggx" else "schlick",
+            ground="plane",
+            ground_reflectance=sequence.config.ground_reflectance,
+        )
+        out[family, fresnel] = averaged_bases(bases, owner, int(checked.sum()))
+    return out
+
+
+def check(path: Path, sequence: mr.MitsubaSequence, scan_lobes: bool = False) -> dict:
     """One clean render against each model: the spread at the truth
     (``forward_check.spreads``) and the gamma scan."""
     b = bundle_io.read_bundle(path)
@@ -191,6 +277,11 @@ def check(path: Path, sequence: mr.MitsubaSequence) -> dict:
         for m in MODELS:
             out[m] = forward_check.spreads(y[checked], at_truth[m][0])
         out["scan"] = gamma_scan(y[checked], bases, albedo)
+        if scan_lobes:
+            ex = np.asarray(render.DEFAULT_EXPONENTS)
+            out["lobe_scan"] = lobe_scan(
+                y[checked], scan_bases(b, checked, sequence, ex), albedo, ex
+            )
     return out
 
 
@@ -206,13 +297,14 @@ def main(argv=None) -> None:
         "(default: the seen many-facet plastics of SEQUENCES)",
     )
     ap.add_argument("--json", type=Path, default=RESULT)
+    ap.add_argument("--lobe-scan", action="store_true", help="add lobe_scan's answer per sequence")
     args = ap.parse_args(argv)
     chosen = [tuple(s.split("/", 1)) for s in args.sequences] if args.sequences else SEQUENCES
     rows = []
     for set_name, name in chosen:
         seq = clean_sequence(set_name, name)
         path = mr.render_bundles([seq], CACHE / set_name, threads=args.threads, progress=False)[0]
-        r = check(Path(path), seq)
+        r = check(Path(path), seq, args.lobe_scan)
         r["set"] = set_name
         rows.append(r)
         cells = " ".join(
@@ -226,6 +318,8 @@ def main(argv=None) -> None:
             f"F={r['facets']:3d} object sd at the truth: {cells}",
             flush=True,
         )
+        for lobe, row in r.get("lobe_scan", {}).items():
+            print("   ", lobe, *(f"{k}: {v}" for k, v in row.items()), flush=True)
         args.json.write_text(json.dumps({"sequences": rows}, indent=1) + "\n")
     for m in MODELS:
         sd = [r[m]["object_sd"] for r in rows if m in r]

@@ -1047,6 +1047,30 @@ def test_forward_check_mitsuba_scan_finds_the_gamma_that_made_the_curves():
     assert scan["none"]["object_sd"] > 1e-3
 
 
+def test_forward_check_mitsuba_lobe_scan_finds_lobe_exponent_and_gamma_with_albedo_per_facet():
+    # lobe_scan: curves made by the in-lobe coating at exponent 300 and gamma
+    # 0.30, each facet at its own albedo (x1, x1.6, x0.7 in turn) and an
+    # unknown exposure, are fitted with no spread left by that lobe, exponent
+    # and gamma once each facet has its own albedo; with one albedo the
+    # facets' levels leave a spread of the order of their log ratios (sd of
+    # log 1, log 1.6, log 0.7 about 0.3). A scan ignoring the per-facet level,
+    # the exponent or the lobe would not give all three.
+    from conftest import paper_three_skies_bases, study_script
+
+    study, _ = study_script("forward_check_mitsuba")
+    ex = np.array([30.0, 300.0, 3000.0])
+    bases, up, _ = paper_three_skies_bases(exponents=ex, lobe_family="ggx", fresnel="schlick-lobe")
+    bases, albedo = bases.take(frames=up), 0.4
+    pred = study.lobe_predictions(bases, albedo, "schlick-lobe", [0.3])[0, :, 1, :]
+    level = np.resize([1.0, 1.6, 0.7], pred.shape[0])[:, None]
+    y = 7.5 * level * pred
+    scan = study.lobe_scan(y, {("ggx", "schlick-lobe"): bases}, albedo, ex)["ggx-schlick-lobe"]
+    per = scan["albedo_per_facet"]
+    assert (per["gamma"], per["exponent"]) == (pytest.approx(0.30), 300.0)
+    assert per["sd"] < 1e-9
+    assert 0.2 < scan["one_albedo"]["sd"] < 0.5
+
+
 def test_light_trends_residual_sd_removes_the_line_and_nothing_else():
     # stop 71's light_trends: a frame's log sun exactly linear in air mass
     # leaves no residual (to rounding); alternating +-0.1 about a line over
