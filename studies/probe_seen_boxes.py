@@ -131,7 +131,7 @@ def main(argv=None) -> list[dict]:
         "--options",
         type=json.loads,
         default=None,
-        help="estimate_bundle's keywords as JSON, e.g. '{\"lobe\": \"ggx\"}'",
+        help='estimate_bundle\'s keywords as JSON, e.g. \'{"lobe": "ggx"}\'',
     )
     ap.add_argument("--out", default=None, help="JSON lines (default studies/out/probe_NAME.jsonl)")
     args = ap.parse_args(argv)
