@@ -165,12 +165,17 @@ def predictions(b, day, config, checked) -> dict:
     }
 
 
+def log_ratio(y, model) -> np.ndarray:
+    """log(y / model), NaN where either is not positive (or not finite)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.log(y / model)
+    return np.where(np.isfinite(r), r, np.nan)
+
+
 def spreads(y, model) -> dict:
     """Spread of log(y / model) over the frames, per facet and about one
     value common to all facets (entries where either is not positive left out)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.log(y / model)
-    r = np.where(np.isfinite(r), r, np.nan)
+    r = log_ratio(y, model)
     per = np.nanmax(r, axis=1) - np.nanmin(r, axis=1)
     sd = np.nanstd(r, axis=1)
     common = float(np.nanstd(r))

@@ -126,45 +126,59 @@ def true_material(b, sequence: mr.MitsubaSequence) -> tuple[float, float, float]
     return r_s + r_d, r_s / (r_s + r_d), n
 
 
-def true_bases(b, checked, sequence: mr.MitsubaSequence, n: float):
-    """The GGX bases (with Schlick's rise in the lobe) of the ``checked``
-    facets at exponent ``n`` under the true sky, the convex ground shadow
-    averaged over each facet's points."""
+def true_bases(
+    b,
+    checked,
+    sequence: mr.MitsubaSequence,
+    exponents,
+    lobes=(("ggx", "schlick-lobe"),),
+) -> dict:
+    """Bases of the ``checked`` facets under the true sky, tabulated on
+    ``exponents``, for each (lobe family, Fresnel model) of ``lobes`` (GGX
+    with Schlick's rise in the lobe by default; other families with the
+    view's Schlick terms, which a lobe without Fresnel leaves unused), the
+    convex ground shadow averaged over each facet's points; the sky and the
+    points are made once for all lobes."""
     day = mr.frame_skies(sequence.config)
     points, owner = shadow_points(b.facets, b.camera_position, which=checked)
-    bases = il.illumination_bases(
-        points,
-        day,
-        exponents=[n],
-        lobe_family="ggx",
-        fresnel="schlick-lobe",
-        ground="plane",
-        ground_reflectance=sequence.config.ground_reflectance,
-    )
-    return averaged_bases(bases, owner, int(checked.sum()))
+    out = {}
+    for family, fresnel in lobes:
+        bases = il.illumination_bases(
+            points,
+            day,
+            exponents=exponents,
+            lobe_family=family,
+            fresnel="schlick-lobe" if family == "ggx" else "schlick",
+            ground="plane",
+            ground_reflectance=sequence.config.ground_reflectance,
+        )
+        out[family, fresnel] = averaged_bases(bases, owner, int(checked.sum()))
+    return out
 
 
 def model_predictions(bases, albedo: float, gamma) -> dict:
     """Each model's radiance of the facets for ``gamma`` (a scalar, or an
-    array (G,) of them), (G, F, T), the Fresnel strength k = 1."""
-    gamma = np.atleast_1d(np.asarray(gamma, float))[:, None, None, None]  # (G, 1, 1, 1)
+    array (G,) of them), (G, F, T), at the bases' first exponent, the
+    Fresnel strength k = 1: ``none`` and ``in-lobe`` are
+    :func:`lobe_predictions`' (without Fresnel, with the rise in the lobe)."""
+    gamma = np.atleast_1d(np.asarray(gamma, float))
     terms = bases.fresnel
-    log_a = np.log(albedo)
-    out = {m: 0.0 for m in MODELS}
+    view_rise = 0.0
+    g4 = gamma[:, None, None, None]  # (G, 1, 1, 1)
     for p in (0, 1):  # the sun, the sky (one sky model: source 2 is its copy)
         d = bases.diffuse[p][:, None, :]  # (F, 1, T)
         g = bases.glossy[p][:, :1, :]
-        g_s = terms.glossy_rise[p][:, :1, :]
         sun = terms.sun_direct if p == 0 else None
-        base = (1 - gamma) * d + gamma * g
-        out["none"] = out["none"] + albedo * base
-        out["view-rise"] = out["view-rise"] + albedo * fr.fresnel_parts(
-            base, g, 1.0, log_a, terms.view, sun, gamma
+        base = (1 - g4) * d + g4 * g
+        view_rise = view_rise + albedo * fr.fresnel_parts(
+            base, g, 1.0, np.log(albedo), terms.view, sun, g4
         )
-        out["in-lobe"] = out["in-lobe"] + albedo * fr.fresnel_parts_in_lobe(
-            d, g, g_s, 1.0, log_a, terms.view, gamma, sun
-        )
-    return {m: v[:, :, 0, :] for m, v in out.items()}
+    out = {
+        "none": lobe_predictions(bases, albedo, "none", gamma),
+        "view-rise": view_rise,
+        "in-lobe": lobe_predictions(bases, albedo, "schlick-lobe", gamma),
+    }
+    return {m: out[m][:, :, 0, :] for m in MODELS}
 
 
 def gamma_scan(y, bases, albedo: float) -> dict:
@@ -206,9 +220,7 @@ def spread_one_and_per_facet(y, pred) -> tuple[np.ndarray, np.ndarray]:
     albedo and the exposure free) and about each facet's own value (a free
     albedo per facet), for ``pred`` (..., F, T) against ``y`` (F, T); entries
     where either is not positive are left out."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.log(y / pred)
-    r = np.where(np.isfinite(r), r, np.nan)
+    r = forward_check.log_ratio(y, pred)
     one = np.nanstd(r.reshape(*r.shape[:-2], -1), axis=-1)
     per = np.sqrt(np.nanmean((r - np.nanmean(r, axis=-1, keepdims=True)) ** 2, axis=(-2, -1)))
     return one, per
@@ -236,25 +248,6 @@ def lobe_scan(y, bases_by_lobe: dict, albedo: float, exponents) -> dict:
     return out
 
 
-def scan_bases(b, checked, sequence: mr.MitsubaSequence, exponents) -> dict:
-    """The bases of :data:`SCAN_LOBES` under the true sky, as :func:`true_bases`."""
-    day = mr.frame_skies(sequence.config)
-    points, owner = shadow_points(b.facets, b.camera_position, which=checked)
-    out = {}
-    for family, fresnel in SCAN_LOBES:
-        bases = il.illumination_bases(
-            points,
-            day,
-            exponents=exponents,
-            lobe_family=family,
-            fresnel="schlick-lobe" if family == "ggx" else "schlick",
-            ground="plane",
-            ground_reflectance=sequence.config.ground_reflectance,
-        )
-        out[family, fresnel] = averaged_bases(bases, owner, int(checked.sum()))
-    return out
-
-
 def check(path: Path, sequence: mr.MitsubaSequence, scan_lobes: bool = False) -> dict:
     """One clean render against each model: the spread at the truth
     (``forward_check.spreads``) and the gamma scan."""
@@ -272,7 +265,7 @@ def check(path: Path, sequence: mr.MitsubaSequence, scan_lobes: bool = False) ->
         "normal_z": np.asarray(b.facets.normal)[checked, 2].round(3).tolist(),
     }
     if checked.any():
-        bases = true_bases(b, checked, sequence, n)
+        bases = true_bases(b, checked, sequence, [n])["ggx", "schlick-lobe"]
         at_truth = model_predictions(bases, albedo, gamma)
         for m in MODELS:
             out[m] = forward_check.spreads(y[checked], at_truth[m][0])
@@ -280,7 +273,7 @@ def check(path: Path, sequence: mr.MitsubaSequence, scan_lobes: bool = False) ->
         if scan_lobes:
             ex = np.asarray(render.DEFAULT_EXPONENTS)
             out["lobe_scan"] = lobe_scan(
-                y[checked], scan_bases(b, checked, sequence, ex), albedo, ex
+                y[checked], true_bases(b, checked, sequence, ex, SCAN_LOBES), albedo, ex
             )
     return out
 
