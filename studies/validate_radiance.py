@@ -82,6 +82,7 @@ SETS = {
     "validation_holdout28": "validation_holdout28",
     "validation_holdout29": "validation_holdout29",
     "validation_holdout30": "validation_holdout30",
+    "validation_holdout31": "validation_holdout31",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -99,6 +100,7 @@ SETS = {
     "mitsuba_holdout14": "validation_mitsuba_holdout14",
     "mitsuba_holdout15": "validation_mitsuba_holdout15",
     "mitsuba_holdout16": "validation_mitsuba_holdout16",
+    "mitsuba_holdout17": "validation_mitsuba_holdout17",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -162,6 +164,10 @@ SCORED_ELSEWHERE = {
     # fitted beside it and their spread in the model error
     # (bayesgloss.model_error.choice_spread)
     "sunless-lobe-error": "perez",
+    # stop 74's candidate (studies/patches/fresnel-start.patch): the
+    # one-material chain started at gamma, n, k and A profiled with the
+    # data's own Fresnel model (bayesgloss.sampling.starts.starting_material)
+    "fresnel-start": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -229,6 +235,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout14": ("baseline", "perez"),  # the same, again; and within-2se, merged
     "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
     "mitsuba_holdout16": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
+    "mitsuba_holdout17": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -256,6 +263,7 @@ DEFAULT_METHODS = {
     "validation_holdout28": ("baseline", "perez"),  # the default again; within-2se merged
     "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
     "validation_holdout30": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
+    "validation_holdout31": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
 }
 
 
