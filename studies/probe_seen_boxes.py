@@ -46,6 +46,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
+from code_under_test import check as check_code  # noqa: E402
 from validate_radiance import SETS  # noqa: E402  (each set's committed results file)
 
 #: stop 68's nine sun-lit boxes, then its four many-facet controls
@@ -135,6 +136,7 @@ def main(argv=None) -> list[dict]:
     )
     ap.add_argument("--out", default=None, help="JSON lines (default studies/out/probe_NAME.jsonl)")
     args = ap.parse_args(argv)
+    check_code("probe_seen_boxes")  # the candidate probed is the tree on PYTHONPATH
     warnings.simplefilter("ignore")
     out = Path(args.out or HERE / "out" / f"probe_{args.name}.jsonl")
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -43,6 +43,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from code_under_test import check as check_code  # a sibling study (studies/ on sys.path)
 
 from bayesgloss.intervals import reported_interval
 from bayesgloss.pool import process_pool
@@ -962,6 +963,7 @@ def main(argv=None) -> None:
         "(a run stopped part way; its results then hold only the bundles scored)",
     )
     args = ap.parse_args(argv)
+    check_code("validate_radiance")  # a candidate's worktree on PYTHONPATH is the code scored
     methods = args.methods or DEFAULT_METHODS.get(args.set, METHODS)
     if args.merge:  # another worktree's scores of the same set, under their own name
         method, folder = args.merge

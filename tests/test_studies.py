@@ -1176,3 +1176,19 @@ def test_mitsuba_set_renders_only_the_named_sequences_with_the_sets_keys(monkeyp
     assert len(seen) == 2
     with pytest.raises(SystemExit, match="ms99"):
         module.main([*argv, "--only", "ms99"])
+
+
+def test_code_under_test_stops_a_run_whose_pythonpath_tree_is_not_the_one_imported(tmp_path):
+    # a candidate scored from its worktree must import that worktree's
+    # bayesgloss; stop 75's machine imported the editable install's (main)
+    # ahead of PYTHONPATH, which would score the default as the candidate
+    cut = study_module("code_under_test")
+    here = cut.imported_tree()
+    other = tmp_path / "worktree"
+    (other / "bayesgloss").mkdir(parents=True)
+    (other / "bayesgloss" / "__init__.py").write_text("")
+    with pytest.raises(SystemExit, match="PYTHONPATH names the bayesgloss of .*worktree"):
+        cut.check("a study", pythonpath=f"{tmp_path}{os.pathsep}{other}")
+    assert cut.check("a study", pythonpath=f"{tmp_path}{os.pathsep}{here}") == here
+    assert cut.check("a study", pythonpath=str(tmp_path)) == here  # no package there
+    assert cut.wanted_tree("") is None
