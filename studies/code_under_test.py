@@ -7,7 +7,8 @@ stop 75's machine an editable install made with pip's default mode
 imported the installed tree (main) before ``PYTHONPATH``'s, so a
 candidate's run would have scored the default under the candidate's name.
 An install in setuptools' compat mode (``pip install -e . --config-settings
-editable_mode=compat``, a path entry after ``PYTHONPATH``'s) does not.
+editable_mode=compat``, a path entry after ``PYTHONPATH``'s) does not. Nor
+does ``python -c`` from a checkout, whose current folder comes first.
 
 :func:`check` makes the mismatch an error before anything is fitted.
 """
@@ -60,7 +61,9 @@ def check(study: str, pythonpath: str | None = None) -> Path:
     if wanted is not None and wanted != got:
         raise SystemExit(
             f"{study}: PYTHONPATH names the bayesgloss of {wanted}, but this process "
-            f"imports the one of {got} (an editable install ahead of PYTHONPATH?); "
-            "reinstall with `pip install -e . --config-settings editable_mode=compat`"
+            f"imports the one of {got}: the current folder (python -c from a "
+            "checkout) or an editable install is ahead of PYTHONPATH; run the study "
+            "as a script from the worktree, and install with `pip install -e . "
+            "--config-settings editable_mode=compat`"
         )
     return got
