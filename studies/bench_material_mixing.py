@@ -29,6 +29,7 @@ import json
 import time
 
 import numpy as np
+from code_under_test import check as check_code  # a sibling study (studies/ on sys.path)
 
 from bayesgloss import illumination as il
 from bayesgloss.joint_estimate import JOINT_MAX_SWEEPS
@@ -79,6 +80,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    check_code("bench_material_mixing")  # a candidate's worktree on PYTHONPATH is the code run
     with process_pool(args.jobs) as pool:
         rows = list(pool.map(fit_object, [args.seed] * args.n, range(args.n)))
     summary = {

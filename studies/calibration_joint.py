@@ -100,6 +100,7 @@ from pathlib import Path
 import _common
 import numpy as np
 import pandas as pd
+from code_under_test import check as check_code  # a sibling study (studies/ on sys.path)
 from validation_set import _labels, _sun_z, _uniform, _utc_offset_hours  # the same draws
 
 from bayesgloss import bundle as bundle_io
@@ -1044,6 +1045,7 @@ def main(argv=None) -> dict:
         "--plot-only", action="store_true", help="redraw the figure from the saved results"
     )
     args = ap.parse_args(argv)
+    check_code("calibration_joint")  # a candidate's worktree on PYTHONPATH is the code run
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results_path, figure_path = out / f"{NAME}.json", out / f"{NAME}.png"

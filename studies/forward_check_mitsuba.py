@@ -70,6 +70,7 @@ sys.path.insert(0, str(HERE))
 
 import forward_check  # noqa: E402
 import mitsuba_set  # noqa: E402
+from code_under_test import check as check_code  # noqa: E402
 
 from bayesgloss import bundle as bundle_io  # noqa: E402
 from bayesgloss import fresnel as fr  # noqa: E402
@@ -292,6 +293,7 @@ def main(argv=None) -> None:
     ap.add_argument("--json", type=Path, default=RESULT)
     ap.add_argument("--lobe-scan", action="store_true", help="add lobe_scan's answer per sequence")
     args = ap.parse_args(argv)
+    check_code("forward_check_mitsuba")  # a candidate's worktree on PYTHONPATH is the code run
     chosen = [tuple(s.split("/", 1)) for s in args.sequences] if args.sequences else SEQUENCES
     rows = []
     for set_name, name in chosen:

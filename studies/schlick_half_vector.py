@@ -45,6 +45,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from code_under_test import check as check_code  # noqa: E402
+
 OUT = HERE / "out" / "schlick_half_vector"
 #: The seen sets' many-facet plastics with a sky family the default weighed
 #: most (not the tied ones): (set config, sequence name, the score's method).
@@ -138,6 +140,7 @@ def main(argv=None) -> None:
     ap.add_argument("--table", nargs="*", help="print the answers of these labels side by side")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
+    check_code("schlick_half_vector")  # a candidate's worktree on PYTHONPATH is the code run
     if args.table is not None:
         table(args.table or sorted(p.stem for p in OUT.glob("*.json")))
         return

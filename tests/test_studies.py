@@ -1192,3 +1192,47 @@ def test_code_under_test_stops_a_run_whose_pythonpath_tree_is_not_the_one_import
     assert cut.check("a study", pythonpath=f"{tmp_path}{os.pathsep}{here}") == here
     assert cut.check("a study", pythonpath=str(tmp_path)) == here  # no package there
     assert cut.wanted_tree("") is None
+
+
+@pytest.mark.parametrize(
+    ("name", "argv"),
+    [
+        ("validate_radiance", []),
+        ("probe_seen_boxes", ["--name", "a-candidate"]),
+        ("calibration_joint", []),
+        ("forward_check_mitsuba", []),
+        ("schlick_half_vector", []),
+        ("bench_material_mixing", []),
+    ],
+)
+def test_studies_run_from_a_worktree_stop_before_fitting_the_wrong_tree(name, argv, tmp_path):
+    # every study that is run with PYTHONPATH=<worktree> to score or probe a
+    # candidate checks first that it imports that tree (code_under_test).
+    # The study runs in its own process, from the checkout's folder (which
+    # comes ahead of PYTHONPATH), so that one which does not check goes on
+    # to fit and is killed at the timeout instead of holding the test run.
+    other = tmp_path / "worktree"
+    (other / "bayesgloss").mkdir(parents=True)
+    (other / "bayesgloss" / "__init__.py").write_text("")
+    script = STUDIES / f"{name}.py"
+    code = (
+        f"import sys, runpy; sys.argv = {[str(script), *argv]!r}; "
+        f"sys.path.insert(1, {str(STUDIES)!r}); runpy.run_path(sys.argv[0], run_name='__main__')"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=STUDIES.parent,
+        env={**os.environ, "PYTHONPATH": str(other)},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"{name} did not check its tree before starting work")
+    assert proc.returncode != 0
+    assert f"{name}: PYTHONPATH names the bayesgloss of {other}" in err
