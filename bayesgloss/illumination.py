@@ -93,6 +93,7 @@ __all__ = [
     "joint_data",
     "log_prior_facets",
     "log_prior_frames",
+    "log_prior_frames_along",
     "log_prior_material",
     "log_sun_weights",
     "material_m_center",
@@ -741,7 +742,15 @@ def _logsumexp_finite(parts) -> np.ndarray:
 def _log_softmax_norm(v) -> np.ndarray:
     """log(1 + sum_k e^(v_k)) over the last axis of v (..., K - 1), finite:
     the normaliser of the softmax of (0, v_1, ..., v_(K-1)), (...)."""
-    return _logsumexp_finite([np.zeros_like(v[..., 0])] + [v[..., k] for k in range(v.shape[-1])])
+    # _logsumexp_finite's folds with the first part 0, the scalar in place of
+    # an array of zeros (the same numbers: a fifth of its time went to the zeros)
+    top = 0.0
+    for k in range(v.shape[-1]):
+        top = np.maximum(top, v[..., k])
+    total = np.exp(0.0 - top)
+    for k in range(v.shape[-1]):
+        total += np.exp(v[..., k] - top)
+    return top + np.log(total)
 
 
 def _log_softmax_after_zero(v) -> np.ndarray:
@@ -771,8 +780,51 @@ def log_prior_frames(
     log e_t ~ N(mu_e, sd_e^2) where the exposure is unknown; None: N(0,
     ``exposure_sd``^2) (its constant left out).
     """
+    return _frame_prior_terms(
+        lam[..., 0], lam[..., 1], lam[..., 2], lam[..., 3:], data, log_sun_weights, point_mass, exposure
+    )
+
+
+def log_prior_frames_along(
+    lam, offsets, direction, data: JointData, log_sun_weights=None, exposure=None
+) -> np.ndarray:
+    """:func:`log_prior_frames` of the latents moved along a direction by each
+    of many offsets, (K, ..., T): ``lam + offsets[..., None] * direction``
+    for lam (..., T, L), offsets (K, ..., T) or broadcastable to it,
+    direction (L,).
+
+    The same numbers, bit for bit, as :func:`log_prior_frames` of the moved
+    array, at a fraction of its cost: each term of the prior is computed on
+    the moved latents only where ``direction`` moves them, and once, broadcast
+    over the offsets, where it does not (the ridge moves of
+    :mod:`bayesgloss.sampling.material` move the exposure, sun and sky along
+    17 offsets and never the sky shapes: stop 77 found the shapes' and the
+    sun's terms recomputed at every offset took an eighth of a sweep).
+    ``exposure`` (..., 2) may carry the offsets' axis too."""
+    offsets = np.asarray(offsets, dtype=float)
+
+    def latent(i):
+        return lam[..., i] + offsets * direction[i] if direction[i] != 0 else lam[..., i]
+
+    if np.any(np.asarray(direction)[3:] != 0):
+        shapes = lam[..., 3:] + offsets[..., None] * direction[3:]
+    else:
+        shapes = lam[..., 3:]
+    out = _frame_prior_terms(
+        latent(0), latent(1), latent(2), shapes, data, log_sun_weights, False, exposure
+    )
+    shape = np.broadcast_shapes(offsets.shape, lam.shape[:-1])
+    # where no term the direction moves is in the prior (an exposure known)
+    return out if out.shape == shape else np.broadcast_to(out, shape).copy()
+
+
+def _frame_prior_terms(
+    log_e, log_a, log_b, shape_ratios, data: JointData, log_sun_weights, point_mass, exposure
+) -> np.ndarray:
+    """The sum of :func:`log_prior_frames`'s terms from each latent's own
+    array (each of (..., T), the shape ratios (..., T, L - 3)); arrays that
+    differ in their leading axes broadcast."""
     q = data.frame_priors
-    log_e, log_a, log_b = lam[..., 0], lam[..., 1], lam[..., 2]
     clear = -0.5 * (log_a / q.sun_clear_sd) ** 2 - np.log(q.sun_clear_sd)
     cloud = -0.5 * ((log_a - q.sun_cloud_mean) / q.sun_cloud_sd) ** 2 - np.log(q.sun_cloud_sd)
     if log_sun_weights is None:
@@ -791,10 +843,10 @@ def log_prior_frames(
             sun = _logsumexp_finite([clear + w[..., 0], cloud + w[..., 1], hidden + w[..., 2]])
     lp = sun - 0.5 * (log_b / q.sky_sd) ** 2
     if data.shapes >= 2:  # w uniform on the simplex: sum_k log w_k in the u coordinates
-        norm = _log_softmax_norm(lam[..., 3:])
+        norm = _log_softmax_norm(shape_ratios)
         total = -norm  # log w_0, then each further model's, summed in order
-        for k in range(3, lam.shape[-1]):
-            total = total + (lam[..., k] - norm)
+        for k in range(shape_ratios.shape[-1]):
+            total = total + (shape_ratios[..., k] - norm)
         lp = lp + total
     if data.exposure_known:
         return lp

@@ -55,6 +55,43 @@ def test_frame_prior_is_the_documented_mixture():
     assert dens[np.searchsorted(x, -3.0)] > 50 * np.exp(-0.5 * (3 / p.sun_clear_sd) ** 2)
 
 
+@pytest.mark.parametrize("exposure_known", [True, False])
+def test_frame_prior_along_a_direction_is_the_moved_prior_bit_for_bit(
+    paper_three_skies, exposure_known
+):
+    # log_prior_frames_along computes each term of the frames' prior on the
+    # moved latents only where the direction moves them, and must give the
+    # same numbers, bit for bit, as log_prior_frames of the moved array (the
+    # samplers' draws depend on it): checked for the three ridges' directions,
+    # a day-level exposure with the offsets' axis, and a direction that moves
+    # the sky shapes too. A version that left a moved latent unmoved would
+    # differ by the shift's effect on its term (shown below to be large).
+    full, up = paper_three_skies
+    bases = full.take(slice(0, 3), up)
+    f, t = bases.diffuse.shape[1:]
+    exposure = np.ones(t) if exposure_known else None
+    data = il.joint_data(np.ones((f, t)), np.ones((f, t), bool), bases, exposure=exposure)
+    rng = np.random.default_rng(5)
+    e, w, n_l = 2, 6, data.n_latents
+    lam = rng.normal(0.0, 0.8, (e, w, t, n_l))
+    hyper = rng.normal(0.0, 0.5, (e, w, 6))
+    weights = il.log_sun_weights(hyper)
+    shapes_too = np.arange(n_l, dtype=float) - 1.5
+    directions = [data.exposure_direction, np.eye(n_l)[0], np.eye(n_l)[1] + np.eye(n_l)[2]]
+    for direction in directions + [shapes_too]:
+        c = 0.3 * np.arange(-4, 5)[:, None, None] * rng.uniform(0.5, 1.5, (e, w))  # (K, E, W)
+        day = hyper[None] + c[..., None] * np.eye(6)[4]  # the day's mean moved with them
+        moved = lam[None] + c[..., None, None] * direction
+        want = il.log_prior_frames(moved, data, weights, exposure=il.exposure_day(day))
+        got = il.log_prior_frames_along(
+            lam, c[..., None], direction, data, weights, exposure=il.exposure_day(day)
+        )
+        assert got.shape == want.shape == (9, e, w, t)
+        np.testing.assert_array_equal(got, want)
+    unmoved = il.log_prior_frames(lam[None], data, weights, exposure=il.exposure_day(hyper))
+    assert np.max(np.abs(want - unmoved)) > 1.0
+
+
 def test_joint_model_finds_two_clouded_frames(paper_split):
     # an object simulated by the forward model, its sun cut to 5 % in two frames
     # and the sky 1.8x there; the joint sampler must find both, and gloss

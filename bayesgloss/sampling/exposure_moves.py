@@ -50,11 +50,9 @@ def level_ridge(chain) -> None:
     width = 1.0 / np.sqrt(chain.t * (1 / q.sun_clear_sd**2 + 1 / q.sky_sd**2))
     h = width * chain.rng.uniform(0.2, 0.6)
     c = ridge.lattice_offsets(LEVEL_REACH)[:, None, None] * h  # (K, E, W)
-    lam = chain.lam[None] + c[..., None, None] * direction
     hyper = mean_shifted(chain.hyper[None], c)
-    lp = chain._frame_prior(lam, hyper=hyper).sum(-1) + il.log_prior_exposure_mean(
-        hyper, chain.data
-    )
+    lp = chain._frame_prior_along(c[..., None], direction, hyper).sum(-1)
+    lp = lp + il.log_prior_exposure_mean(hyper, chain.data)
     moved = ridge.lattice_shift(lp, LEVEL_REACH, chain.rng) * h  # (E, W)
     chain.lam = chain.lam + moved[..., None, None] * direction
     chain.hyper[..., 4] += moved

@@ -276,8 +276,12 @@ class _MaterialChain(_JointChain):
             parts_new = il.unit_parts(new, data, self.tables)
             lam_new = lam.copy()
             if carry:
-                s_old, f_old = self._profile(parts_old, lam)
-                s_new, f_new = self._profile(parts_new, lam)
+                # both ends' profiles in one call on the ensembles' axis doubled
+                # (the same numbers as two calls at half the calls' overhead)
+                e = lam.shape[0]
+                both = tuple(np.concatenate(x) for x in zip(parts_old, parts_new, strict=True))
+                s_both, f_both = self._profile(both, np.concatenate([lam, lam]))
+                s_old, s_new, f_old, f_new = s_both[:e], s_both[e:], f_both[:e], f_both[e:]
                 new[..., 2] += s_new - s_old
                 lam_new[..., 1 : 1 + f_new.shape[-1]] += f_new - f_old
             lp_new = self._conditional(new, hyper, lam_new, parts_new, idx)
@@ -368,6 +372,23 @@ class _MaterialChain(_JointChain):
             lam, self.data, il.log_sun_weights(hyper), exposure=il.exposure_day(hyper)
         )
 
+    def _frame_prior_along(self, offsets, direction, hyper=None) -> np.ndarray:
+        """:meth:`_frame_prior` of every walker's frames moved by each of the
+        offsets (K, E, W, T) or broadcastable, along ``direction`` (L,), at the
+        day's exposure of ``hyper`` (it may carry the offsets' axis): (K, E,
+        W, T), by :func:`~bayesgloss.illumination.log_prior_frames_along`.
+        The ridges leave the day's sun weights alone, so they are the
+        walkers' own."""
+        hyper = self.hyper if hyper is None else hyper
+        return il.log_prior_frames_along(
+            self.lam,
+            offsets,
+            direction,
+            self.data,
+            il.log_sun_weights(self.hyper),
+            exposure=il.exposure_day(hyper),
+        )
+
     def _prior_precisions(self, walkers=slice(None)) -> np.ndarray:
         """As the joint sampler's, with each walker's own precision of log
         e_t about the day's where the exposure is day-level, (E, H, 1, L)."""
@@ -432,11 +453,11 @@ class _MaterialChain(_JointChain):
         h = self.scale_step * self.rng.uniform(0.2, 0.6)
         c = ridge.lattice_offsets(RIDGE_REACH)[:, None, None] * h  # (K, E, W)
         m = self.hyper[..., 0]
-        lam = self.lam[None] + c[..., None, None] * shift
         # where the frames' exposures are drawn about the day's, its mean moves with them
         day = self.hyper.shape[-1] > 4
         hyper = exposure_moves.mean_shifted(self.hyper, c) if day else self.hyper
-        lp = -0.5 * ((m - c - c0) / sd) ** 2 + self._frame_prior(lam, hyper=hyper).sum(-1)
+        frames = self._frame_prior_along(c[..., None], shift, hyper)
+        lp = -0.5 * ((m - c - c0) / sd) ** 2 + frames.sum(-1)
         if day:
             lp = lp + il.log_prior_exposure_mean(hyper, self.data)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W)
@@ -481,8 +502,7 @@ class _MaterialChain(_JointChain):
         direction = self.data.exposure_direction
         h = 0.5 * self.rng.uniform(0.2, 0.6)
         c = ridge.lattice_offsets(RIDGE_REACH) * h
-        lam = self.lam[None] + c[:, None, None, None, None] * direction
-        lp = self._frame_prior(lam, hyper=self.hyper)  # (K, E, W, T)
+        lp = self._frame_prior_along(c[:, None, None, None], direction)  # (K, E, W, T)
         moved = ridge.lattice_shift(lp, RIDGE_REACH, self.rng) * h  # (E, W, T)
         self.lam = self.lam + moved[..., None] * direction
 
