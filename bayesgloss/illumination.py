@@ -781,7 +781,14 @@ def log_prior_frames(
     ``exposure_sd``^2) (its constant left out).
     """
     return _frame_prior_terms(
-        lam[..., 0], lam[..., 1], lam[..., 2], lam[..., 3:], data, log_sun_weights, point_mass, exposure
+        lam[..., 0],
+        lam[..., 1],
+        lam[..., 2],
+        lam[..., 3:],
+        data,
+        log_sun_weights,
+        point_mass,
+        exposure,
     )
 
 
