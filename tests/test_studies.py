@@ -1203,6 +1203,7 @@ def test_code_under_test_stops_a_run_whose_pythonpath_tree_is_not_the_one_import
         ("forward_check_mitsuba", []),
         ("schlick_half_vector", []),
         ("bench_material_mixing", []),
+        ("bench_sweep", ["--worker", "box"]),
     ],
 )
 def test_studies_run_from_a_worktree_stop_before_fitting_the_wrong_tree(name, argv, tmp_path):
