@@ -80,7 +80,7 @@ from . import censored, exposure_moves, populations, ridge, schedule
 from .joint import _JointChain, starting_frames
 from .moves import DEFAULT_MOVES, move_named
 from .schedule import JointSamples, run_chain
-from .starts import _reflect, _robust_scales, starting_material
+from .starts import _reflect, _robust_scales, start_theta, starting_material
 
 __all__ = ["sample_material", "first_check"]
 
@@ -104,7 +104,7 @@ class _MaterialChain(_JointChain):
     def __init__(self, data: il.JointData, n_ensembles, n_walkers, rng):
         self._setup(data, n_ensembles, n_walkers, rng)
         lam0 = starting_frames(data)
-        gamma0, log_n0, log_s0 = starting_material(data, lam0)
+        gamma0, log_n0, log_s0, fresnel0 = starting_material(data, lam0)
         e, f, w = self.e, self.f, self.w
         dx = data.log_n_grid[1] - data.log_n_grid[0]
         lo, hi = data.priors.log_n
@@ -115,18 +115,19 @@ class _MaterialChain(_JointChain):
         n = _reflect(log_n0 + 0.3 * dx * rng.standard_normal((e, 1, w)), lo, hi)
         th[..., 0], th[..., 1] = g, n
         th[..., 2] = log_s0[None, :, None] + 0.02 * rng.standard_normal((e, f, w))
-        if data.fresnel is not None:  # k about 1/2, A about 0.3 (column 3 unused)
+        if data.fresnel is not None:  # k and A about the start's (column 3 unused)
             k_col, a_col = fr.FRESNEL_COLUMNS
             a_lo, a_hi = np.log(fr.NORMAL_ALBEDO_RANGE)
-            th[..., k_col] = _reflect(0.5 + 0.1 * rng.standard_normal((e, 1, w)), 0.0, 1.0)
-            log_a = np.log(0.3) + 0.3 * rng.standard_normal((e, 1, w))
+            k0, a0 = fresnel0
+            th[..., k_col] = _reflect(k0 + 0.1 * rng.standard_normal((e, 1, w)), 0.0, 1.0)
+            log_a = np.log(a0) + 0.3 * rng.standard_normal((e, 1, w))
             th[..., a_col] = _reflect(log_a, a_lo, a_hi)
         self.th = th
         # clipped entries: each walker's completed values and its sigma (censored)
         self.y_complete = censored.starting_completion(data, (e, f, w))
         self.log_sigma = None
         # each facet's residual sd at the start (relative), fixed: the profile's weights
-        th0 = np.zeros((1, f, 1, 3))
+        th0 = start_theta(f, 1, fresnel0)
         th0[..., 0], th0[..., 1], th0[..., 2] = gamma0, log_n0, log_s0[None, :, None]
         z, _ = il._residuals(il.predict(th0, lam0[None, None], data), data)
         rms = np.sqrt(np.sum(z[0, :, 0] ** 2, -1) / np.maximum(data.valid.sum(1), 1))
