@@ -84,6 +84,7 @@ SETS = {
     "validation_holdout29": "validation_holdout29",
     "validation_holdout30": "validation_holdout30",
     "validation_holdout31": "validation_holdout31",
+    "validation_holdout32": "validation_holdout32",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -102,6 +103,7 @@ SETS = {
     "mitsuba_holdout15": "validation_mitsuba_holdout15",
     "mitsuba_holdout16": "validation_mitsuba_holdout16",
     "mitsuba_holdout17": "validation_mitsuba_holdout17",
+    "mitsuba_holdout18": "validation_mitsuba_holdout18",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -169,6 +171,10 @@ SCORED_ELSEWHERE = {
     # one-material chain started at gamma, n, k and A profiled with the
     # data's own Fresnel model (bayesgloss.sampling.starts.starting_material)
     "fresnel-start": "perez",
+    # stop 72's design on the default of stop 78 (studies/patches/day-light-fs.patch):
+    # each frame's clear sun and sky about the day's trends in air mass and cos z
+    # (bayesgloss.day_light), their six day-level coordinates sampled with the rest
+    "day-light": "perez",
 }
 #: How each estimating method calls :func:`bayesgloss.estimate.estimate_bundle`.
 #: Every method scored before stop 43 fits the sky families' stack of four
@@ -237,6 +243,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout15": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
     "mitsuba_holdout16": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
     "mitsuba_holdout17": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
+    "mitsuba_holdout18": ("baseline", "perez"),  # mostly boxes; day-light merged (78)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -265,6 +272,7 @@ DEFAULT_METHODS = {
     "validation_holdout29": ("baseline", "perez"),  # sunless; sunless-lobe-error merged (70)
     "validation_holdout30": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
     "validation_holdout31": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
+    "validation_holdout32": ("baseline", "perez"),  # mostly boxes; day-light merged (78)
 }
 
 
