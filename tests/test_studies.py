@@ -520,6 +520,25 @@ def test_holdout_rule_reads_holdout18_and_mitsuba8_as_stop_55_decided(candidate,
         assert round(fitted[candidate]["mae"], 3) == 0.060
 
 
+def test_holdout_rule_reads_holdout31_and_mitsuba17_as_stop_78_decided():
+    # stop 78's decision on the committed scores (fresnel-start, the chain's
+    # own Fresnel start), pooled over 26 sun-lit and 6 sunless: MAE 0.099 ->
+    # 0.081, held 25 -> 26, no confident miss, overcast 6/6 both, 1.03x; on
+    # holdout 31 alone the candidate is 0.001 worse, inside the rule's 0.02
+    hr = study_module("holdout_rule")
+    out = hr.main(
+        ["--set", "validation_holdout31", "--set", "mitsuba_holdout17"]
+        + ["--candidate", "fresnel-start", "--set-tolerance", "0.02"]
+    )
+    d, c = out["pooled"]["perez"], out["pooled"]["fresnel-start"]
+    assert (d["sun_lit"], d["sunless"]) == (26, 6)
+    assert round(d["mae"], 3) == 0.099 and round(c["mae"], 3) == 0.081
+    assert (d["held"], c["held"]) == (25, 26)
+    assert d["confident_misses"] == c["confident_misses"] == []
+    assert d["overcast_ok"] == c["overcast_ok"] == 6
+    assert round(out["speed_ratio"], 2) == 1.03 and out["met"]
+
+
 def test_blend_truth_reads_the_blend_as_the_path_tracer_samples_it():
     # a smooth metal blended with a diffuse base: with w = 1 every sample is
     # the delta lobe (gloss 1); with w = 0.1 Mitsuba's blendbsdf weights the
@@ -1237,3 +1256,16 @@ def test_studies_run_from_a_worktree_stop_before_fitting_the_wrong_tree(name, ar
         pytest.fail(f"{name} did not check its tree before starting work")
     assert proc.returncode != 0
     assert f"{name}: PYTHONPATH names the bayesgloss of {other}" in err
+
+
+def test_sbc_gate_passes_uniform_ranks_and_refuses_an_overconfident_posterior():
+    # 60 objects whose ranks are spread evenly pass (p ~ 1, 54 of 60 held);
+    # ranks piled at the ends, as a posterior too narrow gives, fail both
+    # the chi-square and the hold (the test's own thresholds)
+    gate = study_module("sbc_gate")
+    even = [{"ranks": [int(r), int(r)], "seconds": 1.0} for r in np.linspace(0, 99, 60)]
+    out = gate.summary(even, ("gamma", "log_tau"))
+    assert out["passed"] and out["gamma"]["held90"] == 54
+    piled = [{"ranks": [0 if i % 2 else 99, 50], "seconds": 1.0} for i in range(60)]
+    out = gate.summary(piled, ("gamma", "log_tau"))
+    assert not out["passed"] and out["gamma"]["held90"] == 0 and out["gamma"]["p"] < 1e-3
