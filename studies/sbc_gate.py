@@ -60,6 +60,29 @@ def rank_names(study, ref) -> tuple[str, ...]:
     return names + ("log_exposure_spread",) * il.day_exposure(ref)
 
 
+def read_rows(path: Path) -> list[dict]:
+    """The objects' rows in ``path`` (none if it does not exist yet); a line
+    that is not an object's row stops with the file and line named."""
+    if not path.exists():
+        return []
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as err:
+            raise SystemExit(
+                f"sbc_gate: {path}, line {number}: not an object's row ({err})"
+            ) from None
+        if not isinstance(row, dict) or {"index", "ranks", "seconds"} - set(row):
+            raise SystemExit(
+                f"sbc_gate: {path}, line {number}: not an object's row (no index, ranks, seconds)"
+            )
+        rows.append(row)
+    return rows
+
+
 def summary(rows: list[dict], names) -> dict:
     """Chi-square p (10 bins) and the 90 % hold of each ranked quantity."""
     ranks = np.array([r["ranks"] for r in rows])
@@ -88,6 +111,8 @@ def main(argv=None) -> dict | None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--n", type=int, default=60)
     args = ap.parse_args(argv)
+    if not args.out.parent.is_dir():  # said now, not after an hour of objects
+        raise SystemExit(f"sbc_gate: --out {args.out}: no folder {args.out.parent}")
     from bayesgloss.pool import process_pool
     from bayesgloss.runner import script_unit
 
@@ -101,8 +126,7 @@ def main(argv=None) -> dict | None:
         exposure_known=args.exposure == "known",
     )
     names = rank_names(study, ref)
-    lines = args.rows.read_text().splitlines() if args.rows.exists() else []
-    done = {json.loads(line)["index"] for line in lines if line.strip()}
+    done = {r["index"] for r in read_rows(args.rows)}
     todo = [i for i in range(args.n) if i not in done]
     print(f"sbc_gate: {args.design}, {len(todo)} of {args.n} objects to run; ranks of {names}")
     with process_pool(args.jobs) as pool:
@@ -117,8 +141,7 @@ def main(argv=None) -> dict | None:
             with args.rows.open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(f"object {row['index']}: {row['seconds']:.0f} s", flush=True)
-    rows = [json.loads(line) for line in args.rows.read_text().splitlines() if line.strip()]
-    rows.sort(key=lambda r: r["index"])
+    rows = sorted(read_rows(args.rows), key=lambda r: r["index"])
     if len(rows) < args.n:
         return None
     out = {

@@ -1269,3 +1269,18 @@ def test_sbc_gate_passes_uniform_ranks_and_refuses_an_overconfident_posterior():
     piled = [{"ranks": [0 if i % 2 else 99, 50], "seconds": 1.0} for i in range(60)]
     out = gate.summary(piled, ("gamma", "log_tau"))
     assert not out["passed"] and out["gamma"]["held90"] == 0 and out["gamma"]["p"] < 1e-3
+
+
+def test_sbc_gate_names_the_file_and_line_of_a_row_it_cannot_read(tmp_path):
+    # a resumed run reads the rows already written; a torn last line (a run
+    # killed mid-write) stops with the file and line named, not a traceback
+    gate = study_module("sbc_gate")
+    rows = tmp_path / "rows.jsonl"
+    assert gate.read_rows(rows) == []
+    rows.write_text('{"index": 0, "ranks": [3], "seconds": 1.0}\n\n{"index": 1, "ra\n')
+    with pytest.raises(SystemExit, match=r"rows.jsonl, line 3: not an object's row"):
+        gate.read_rows(rows)
+    rows.write_text('{"index": 0, "ranks": [3], "seconds": 1.0}\n')
+    assert [r["index"] for r in gate.read_rows(rows)] == [0]
+    with pytest.raises(SystemExit, match="no folder"):
+        gate.main(["ward", "--rows", str(rows), "--out", str(tmp_path / "no" / "out.json")])
