@@ -173,16 +173,9 @@ def test_one_material_sbc(paper_three_skies, fresnel, lobe, exposure_known):
             for i in range(60)
         ]
         rows = [f.result() for f in futures]
-    ranks = np.array([r["ranks"] for r in rows])
-    names = ("gamma", "log_tau", "log_sun")
-    names += ("fresnel_strength",) * (fresnel == "radiance")
-    names += ("log_exposure_spread",) * (not exposure_known)
-    assert ranks.shape[1] == len(names)
-    for k, name in enumerate(names):
-        counts = np.bincount(ranks[:, k] * 10 // 100, minlength=10)
-        assert stats.chisquare(counts).pvalue > 1e-3, (name, counts)
-    held = int(np.sum((ranks[:, 0] >= 5) & (ranks[:, 0] <= 94)))
-    assert 46 <= held <= 59, held
+    names = study.rank_names(ref)
+    out = study.rank_summary(rows, names)
+    assert study.rank_summary_passes(out, names, held90=(46, 59)), out
 
 
 @pytest.mark.long

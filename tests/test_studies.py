@@ -1262,13 +1262,34 @@ def test_sbc_gate_passes_uniform_ranks_and_refuses_an_overconfident_posterior():
     # 60 objects whose ranks are spread evenly pass (p ~ 1, 54 of 60 held);
     # ranks piled at the ends, as a posterior too narrow gives, fail both
     # the chi-square and the hold (the test's own thresholds)
-    gate = study_module("sbc_gate")
+    gate, study = study_module("sbc_gate"), study_module("sbc_material")
     even = [{"ranks": [int(r), int(r)], "seconds": 1.0} for r in np.linspace(0, 99, 60)]
-    out = gate.summary(even, ("gamma", "log_tau"))
+    out = gate.summary(study, even, ("gamma", "log_tau"))
     assert out["passed"] and out["gamma"]["held90"] == 54
+    assert out["gamma"]["counts"] == [6] * 10 and out["gamma"]["p"] == pytest.approx(1.0)
     piled = [{"ranks": [0 if i % 2 else 99, 50], "seconds": 1.0} for i in range(60)]
-    out = gate.summary(piled, ("gamma", "log_tau"))
+    out = gate.summary(study, piled, ("gamma", "log_tau"))
     assert not out["passed"] and out["gamma"]["held90"] == 0 and out["gamma"]["p"] < 1e-3
+    # log tau piled in one bin fails the gate although gamma's ranks are even
+    lopsided = [{"ranks": [int(r), 50], "seconds": 1.0} for r in np.linspace(0, 99, 60)]
+    assert not gate.summary(study, lopsided, ("gamma", "log_tau"))["passed"]
+    with pytest.raises(ValueError, match="for 3 names"):
+        study.rank_summary(even, ("gamma", "log_tau", "log_sun"))
+
+
+def test_sbc_rank_names_follow_the_design():
+    # the ranks sbc_object returns, in its order: k with the Fresnel raise,
+    # the day's exposure spread where the exposure is unknown and day-level
+    study = study_module("sbc_material")
+    bases = study.paper_three_skies("phong")
+    kw = {"facets": 2, "frames": 3}
+    assert study.rank_names(study.sbc_design(bases, **kw)) == ("gamma", "log_tau", "log_sun")
+    ref = study.sbc_design(bases, fresnel="radiance", exposure_known=False, **kw)
+    assert study.rank_names(ref) == (
+        "gamma", "log_tau", "log_sun", "fresnel_strength", "log_exposure_spread"
+    )  # fmt: skip
+    row = study.sbc_object(ref, seed=1, index=0, max_sweeps=60, n_draws=9)
+    assert len(row["ranks"]) == 5 and all(0 <= r <= 9 for r in row["ranks"])
 
 
 def test_sbc_gate_names_the_file_and_line_of_a_row_it_cannot_read(tmp_path):
