@@ -1305,3 +1305,51 @@ def test_sbc_gate_names_the_file_and_line_of_a_row_it_cannot_read(tmp_path):
     assert [r["index"] for r in gate.read_rows(rows)] == [0]
     with pytest.raises(SystemExit, match="no folder"):
         gate.main(["ward", "--rows", str(rows), "--out", str(tmp_path / "no" / "out.json")])
+
+
+def test_early_stop_probe_measures_the_shift_and_the_sweeps_saved():
+    # one chain capped at 2000 sweeps whose R-hat falls below 1.05 at 1200,
+    # its quantiles there 0.02 off its end's (width 0.2: a shift of 0.1);
+    # one that met the rule at its first check (nothing to save)
+    probe = study_module("probe_early_stop")
+    end = [[0.4, 0.5, 0.6]]
+    checks = [
+        {"chain": "a", "sweeps": s, "max_sweeps": 2000, "rhat_gamma": r, "rhat_frames": 1.0,
+         "q": [[0.42, 0.5, 0.62]] if s == 1200 else end}
+        for s, r in ((400, 1.3), (800, 1.04), (1200, 1.04), (1600, 1.03), (2000, 1.02))
+    ] + [{"chain": "b", "sweeps": 400, "max_sweeps": 2000, "rhat_gamma": 1.005,
+          "rhat_frames": 1.002, "q": end}]  # fmt: skip
+    at = probe.shifts(checks, 1.05)
+    assert at["chains"] == 2 and at["stopped_early"] == 1  # 800 is before half the cap
+    assert at["shift_max"] == pytest.approx(0.1) and at["sweeps_saved_share"] == pytest.approx(0.2)
+    never = probe.shifts(checks, 1.01)
+    assert never["stopped_early"] == 0 and never["shift_max"] == 0.0
+    # the frames' R-hat counts as well as gamma's
+    checks[2]["rhat_frames"] = 1.2
+    assert probe.shifts(checks, 1.05)["shift_max"] == 0.0
+
+
+def test_early_stop_probe_records_every_check_of_a_chain(tmp_path, monkeypatch):
+    # the probe's wrappers see each check of a real (tiny) one-material run,
+    # with the sweeps at which it was made; the originals come back after
+    from bayesgloss.sampling import joint, material, schedule
+
+    for module, name in ((schedule, "_rule_checked"), (schedule, "_diagnosed"),
+                         (joint, "run_chain"), (material, "run_chain")):  # fmt: skip
+        monkeypatch.setattr(module, name, getattr(module, name))
+    probe, sbc = study_module("probe_early_stop"), study_module("sbc_material")
+    out = tmp_path / "checks.jsonl"
+    probe.install(out)
+    import dataclasses
+
+    ref = sbc.sbc_design(sbc.paper_three_skies("phong"), facets=2, frames=3)
+    y = sbc.prior_predictive(ref, np.random.default_rng(7))[3]
+    material.sample_material(
+        dataclasses.replace(ref, y=y), n_ensembles=4, n_walkers=8, chunk=50,
+        min_sweeps=100, max_sweeps=200, draws_per_ensemble=16, seed=3,
+    )  # fmt: skip
+    rows = [json.loads(x) for x in out.read_text().splitlines()]
+    assert [r["sweeps"] for r in rows] == [100, 150, 200][: len(rows)] and rows
+    assert len({r["chain"] for r in rows}) == 1 and rows[0]["max_sweeps"] == 200
+    q = np.array(rows[-1]["q"])
+    assert q.shape == (1, 3) and np.all(np.diff(q, axis=1) >= 0) and 0 < q[0, 1] < 1
