@@ -25,7 +25,7 @@ those at its real end in units of its real 90 % width, and what share of
 its sweeps it would have saved.
 
 Usage: python studies/probe_early_stop.py [--out studies/out/probe_early_stop.jsonl]
-       [SET:msNN ...]            (default: probe_seen_boxes' list)
+       [--options JSON] [SET:msNN | BUNDLE_PATH ...]   (default: probe_seen_boxes' list)
        python studies/probe_early_stop.py --read FILE [--rhat 1.05 1.1 1.2]
 """
 
@@ -151,7 +151,13 @@ def shifts(rows: list[dict], rhat_max: float, from_share: float = 0.5) -> dict:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("sequences", nargs="*", default=list(STOP68), help="SET:msNN")
+    ap.add_argument("sequences", nargs="*", default=list(STOP68), help="SET:msNN, or a path")
+    ap.add_argument(
+        "--options",
+        type=json.loads,
+        default=None,
+        help='estimate_bundle\'s keywords as JSON, e.g. \'{"illumination": "auto"}\'',
+    )
     ap.add_argument("--out", default=str(HERE / "out" / "probe_early_stop.jsonl"))
     ap.add_argument("--read", default=None, help="only read a probe's file")
     ap.add_argument("--rhat", type=float, nargs="*", default=[1.02, 1.05, 1.1, 1.2])
@@ -168,11 +174,11 @@ def main(argv=None) -> None:
         out.parent.mkdir(parents=True, exist_ok=True)
         install(out)
         for item in args.sequences:
-            set_name, prefix = item.split(":")
-            path = bundle_of(set_name, prefix)
-            _record({"sequence": item, "start": time.time()})
+            path = Path(item) if ":" not in item else bundle_of(*item.split(":"))
+            _record({"sequence": item, "options": args.options, "start": time.time()})
             t0 = time.time()
-            res = estimate.estimate_bundle(str(path), seed=args.seed, jobs=2)
+            kw = args.options or {}
+            res = estimate.estimate_bundle(str(path), seed=args.seed, jobs=2, **kw)
             g = res.summary["object"]["gamma"]
             _record({"sequence": item, "seconds": time.time() - t0, "median": g["median"]})
             print(item, f"{time.time() - t0:.0f} s", flush=True)
