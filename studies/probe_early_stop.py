@@ -109,13 +109,18 @@ def install(out: Path) -> None:
     joint.run_chain = material.run_chain = run_chain_logged
 
 
-def shifts(rows: list[dict], rhat_max: float, from_share: float = 0.5) -> dict:
+def shifts(
+    rows: list[dict], rhat_max: float, from_share: float = 0.5, only_capped: bool = False
+) -> dict:
     """Where each chain that ran past its first check would have stopped
     under "every R-hat below ``rhat_max`` at a check from ``from_share`` of
     the cap on" (or at its real end): the largest shift of a quantile
     against its real end's, in units of the real 90 % width, and the share
     of its sweeps saved. Chains are keyed as recorded; a resumed chain is
-    its own key (its checks go on from the first run's sweeps)."""
+    its own key (its checks go on from the first run's sweeps).
+    ``only_capped``: only the chains that ran to their cap unconverged,
+    past a first check (the runs an early stop is for; a sky family's
+    screen, capped at its first check, has nothing to stop early)."""
     chains: dict[str, list[dict]] = {}
     for r in rows:
         chains.setdefault(r["chain"], []).append(r)
@@ -123,6 +128,9 @@ def shifts(rows: list[dict], rhat_max: float, from_share: float = 0.5) -> dict:
     for checks in chains.values():
         end = checks[-1]
         cap = end["max_sweeps"] or end["sweeps"]
+        capped = len(checks) > 1 and end["sweeps"] == cap and not end.get("met", False)
+        if only_capped and not capped:
+            continue
         stop = next(
             (
                 c
@@ -140,6 +148,7 @@ def shifts(rows: list[dict], rhat_max: float, from_share: float = 0.5) -> dict:
     shift, saved = np.array(shift), np.array(saved)
     return {
         "rhat_max": rhat_max,
+        "only_capped": only_capped,
         "chains": len(shift),
         "stopped_early": int(np.sum(saved > 0)),
         "shift_median": float(np.median(shift)) if len(shift) else None,
@@ -184,8 +193,9 @@ def main(argv=None) -> None:
             print(item, f"{time.time() - t0:.0f} s", flush=True)
     rows = [json.loads(x) for x in Path(args.read or args.out).read_text().splitlines()]
     checks = [r for r in rows if "chain" in r]
-    for t in args.rhat:
-        print(json.dumps(shifts(checks, t)))
+    for capped in (False, True):
+        for t in args.rhat:
+            print(json.dumps(shifts(checks, t, only_capped=capped)))
 
 
 if __name__ == "__main__":

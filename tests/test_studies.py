@@ -1322,6 +1322,8 @@ def test_early_stop_probe_measures_the_shift_and_the_sweeps_saved():
     at = probe.shifts(checks, 1.05)
     assert at["chains"] == 2 and at["stopped_early"] == 1  # 800 is before half the cap
     assert at["shift_max"] == pytest.approx(0.1) and at["sweeps_saved_share"] == pytest.approx(0.2)
+    capped = probe.shifts(checks, 1.05, only_capped=True)  # b met the rule: left out
+    assert capped["chains"] == 1 and capped["sweeps_saved_share"] == pytest.approx(0.4)
     never = probe.shifts(checks, 1.01)
     assert never["stopped_early"] == 0 and never["shift_max"] == 0.0
     # the frames' R-hat counts as well as gamma's
