@@ -110,7 +110,11 @@ def install(out: Path) -> None:
 
 
 def shifts(
-    rows: list[dict], rhat_max: float, from_share: float = 0.5, only_capped: bool = False
+    rows: list[dict],
+    rhat_max: float | None,
+    from_share: float = 0.5,
+    only_capped: bool = False,
+    ess_min: float = 400.0,
 ) -> dict:
     """Where each chain that ran past its first check would have stopped
     under "every R-hat below ``rhat_max`` at a check from ``from_share`` of
@@ -118,6 +122,10 @@ def shifts(
     against its real end's, in units of the real 90 % width, and the share
     of its sweeps saved. Chains are keyed as recorded; a resumed chain is
     its own key (its checks go on from the first run's sweeps).
+    ``rhat_max`` None: the other rule, "stop where the chain cannot reach
+    ``ess_min`` by its cap": the smallest ESS at a check from ``from_share``
+    of the cap on, grown in proportion to the sweeps, is below ``ess_min``
+    at the cap (a flagged answer sooner; a chain on its way is let run).
     ``only_capped``: only the chains that ran to their cap unconverged,
     past a first check (the runs an early stop is for; a sky family's
     screen, capped at its first check, has nothing to stop early)."""
@@ -137,7 +145,7 @@ def shifts(
                 for c in checks
                 if c["sweeps"] is not None
                 and c["sweeps"] >= from_share * cap
-                and max(c["rhat_gamma"], c["rhat_frames"] or 0.0) < rhat_max
+                and _stops(c, cap, rhat_max, ess_min)
             ),
             end,
         )
@@ -156,6 +164,15 @@ def shifts(
         "shift_over_0.1": int(np.sum(shift > 0.1)),
         "sweeps_saved_share": float(np.mean(saved)) if len(saved) else None,
     }
+
+
+def _stops(check: dict, cap: int, rhat_max: float | None, ess_min: float) -> bool:
+    """Whether a check stops its chain: every R-hat below ``rhat_max``, or
+    (``rhat_max`` None) its smallest ESS grown to the cap below ``ess_min``."""
+    if rhat_max is not None:
+        return max(check["rhat_gamma"], check["rhat_frames"] or 0.0) < rhat_max
+    ess = min(check["ess_min_gamma"], check["ess_min_frames"] or np.inf)
+    return ess * cap / check["sweeps"] < ess_min
 
 
 def main(argv=None) -> None:
@@ -196,6 +213,7 @@ def main(argv=None) -> None:
     for capped in (False, True):
         for t in args.rhat:
             print(json.dumps(shifts(checks, t, only_capped=capped)))
+        print(json.dumps(shifts(checks, None, only_capped=capped)))
 
 
 if __name__ == "__main__":

@@ -1324,6 +1324,11 @@ def test_early_stop_probe_measures_the_shift_and_the_sweeps_saved():
     assert at["shift_max"] == pytest.approx(0.1) and at["sweeps_saved_share"] == pytest.approx(0.2)
     capped = probe.shifts(checks, 1.05, only_capped=True)  # b met the rule: left out
     assert capped["chains"] == 1 and capped["sweeps_saved_share"] == pytest.approx(0.4)
+    # the other rule: a chain stops where its ESS, grown to the cap, falls short
+    for c, ess in zip(checks[:5], (20, 60, 100, 300, 350), strict=True):
+        c["ess_min_gamma"], c["ess_min_frames"] = ess, 900
+    hopeless = probe.shifts(checks, None, only_capped=True)  # 100 * 2000 / 1200 < 400
+    assert hopeless["stopped_early"] == 1 and hopeless["sweeps_saved_share"] == pytest.approx(0.4)
     never = probe.shifts(checks, 1.01)
     assert never["stopped_early"] == 0 and never["shift_max"] == 0.0
     # the frames' R-hat counts as well as gamma's
