@@ -58,7 +58,6 @@ def _record(row: dict) -> None:
 def install(out: Path) -> None:
     """Wrap the schedule's rule check so that every check of every chain is
     recorded to ``out`` (this process and the workers it forks)."""
-    from bayesgloss import diagnostics
     from bayesgloss.sampling import joint, material, schedule
 
     _STATE["out"] = str(out)
@@ -74,7 +73,7 @@ def install(out: Path) -> None:
 
     def diagnosed_logged(th_kept, lam_kept):
         out = diagnosed(th_kept, lam_kept)
-        rhat, eb, et, _ = out
+        rhat, eb, et, ok = out
         f = th_kept.shape[2]
         gamma = th_kept[..., 0].astype(float)  # (n, E, F, W)
         q = np.quantile(gamma.transpose(2, 0, 1, 3).reshape(f, -1), [0.05, 0.5, 0.95], axis=1)
@@ -90,7 +89,7 @@ def install(out: Path) -> None:
                 "ess_min_frames": float(min(np.min(eb[f:]), np.min(et[f:])))
                 if len(rhat) > f
                 else None,
-                "met": bool(np.all(diagnostics.meets_rule(rhat, eb, et))),
+                "met": bool(np.all(ok)),
                 "q": q.T.round(5).tolist(),  # (F, 3)
             }
         )
@@ -132,7 +131,7 @@ def shifts(
     chains: dict[str, list[dict]] = {}
     for r in rows:
         chains.setdefault(r["chain"], []).append(r)
-    shift, saved = [], []
+    shift, saved, met = [], [], []
     for checks in chains.values():
         end = checks[-1]
         cap = end["max_sweeps"] or end["sweeps"]
@@ -153,7 +152,8 @@ def shifts(
         width = np.maximum(q_end[:, 2] - q_end[:, 0], 1e-3)
         shift.append(float(np.max(np.abs(q_stop - q_end) / width[:, None])))
         saved.append(1.0 - (stop["sweeps"] or 0) / max(end["sweeps"] or 1, 1))
-    shift, saved = np.array(shift), np.array(saved)
+        met.append(len(checks) > 1 and end.get("met", False))
+    shift, saved, met = np.array(shift), np.array(saved), np.array(met, dtype=bool)
     return {
         "rhat_max": rhat_max,
         "only_capped": only_capped,
@@ -163,15 +163,20 @@ def shifts(
         "shift_max": float(np.max(shift)) if len(shift) else None,
         "shift_over_0.1": int(np.sum(shift > 0.1)),
         "sweeps_saved_share": float(np.mean(saved)) if len(saved) else None,
+        # chains that met the rule after more than one check, and that this
+        # rule would have stopped sooner (accepted sooner, or given up on)
+        "met_later": int(np.sum(met)),
+        "met_later_stopped_sooner": int(np.sum(met & (saved > 0))),
     }
 
 
 def _stops(check: dict, cap: int, rhat_max: float | None, ess_min: float) -> bool:
     """Whether a check stops its chain: every R-hat below ``rhat_max``, or
     (``rhat_max`` None) its smallest ESS grown to the cap below ``ess_min``."""
+    frames = check["rhat_frames"] is not None  # None: no frame latents diagnosed
     if rhat_max is not None:
-        return max(check["rhat_gamma"], check["rhat_frames"] or 0.0) < rhat_max
-    ess = min(check["ess_min_gamma"], check["ess_min_frames"] or np.inf)
+        return max(check["rhat_gamma"], check["rhat_frames"] if frames else 0.0) < rhat_max
+    ess = min(check["ess_min_gamma"], check["ess_min_frames"] if frames else np.inf)
     return ess * cap / check["sweeps"] < ess_min
 
 

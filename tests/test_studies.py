@@ -1322,6 +1322,7 @@ def test_early_stop_probe_measures_the_shift_and_the_sweeps_saved():
     at = probe.shifts(checks, 1.05)
     assert at["chains"] == 2 and at["stopped_early"] == 1  # 800 is before half the cap
     assert at["shift_max"] == pytest.approx(0.1) and at["sweeps_saved_share"] == pytest.approx(0.2)
+    assert at["met_later"] == 0  # b met the rule at its only check
     capped = probe.shifts(checks, 1.05, only_capped=True)  # b met the rule: left out
     assert capped["chains"] == 1 and capped["sweeps_saved_share"] == pytest.approx(0.4)
     # the other rule: a chain stops where its ESS, grown to the cap, falls short
@@ -1329,6 +1330,11 @@ def test_early_stop_probe_measures_the_shift_and_the_sweeps_saved():
         c["ess_min_gamma"], c["ess_min_frames"] = ess, 900
     hopeless = probe.shifts(checks, None, only_capped=True)  # 100 * 2000 / 1200 < 400
     assert hopeless["stopped_early"] == 1 and hopeless["sweeps_saved_share"] == pytest.approx(0.4)
+    # had a met the rule at its cap, the ESS rule would have given up on it sooner
+    checks[4]["met"] = True
+    late = probe.shifts(checks, None)
+    assert late["met_later"] == 1 and late["met_later_stopped_sooner"] == 1
+    del checks[4]["met"]
     never = probe.shifts(checks, 1.01)
     assert never["stopped_early"] == 0 and never["shift_max"] == 0.0
     # the frames' R-hat counts as well as gamma's
