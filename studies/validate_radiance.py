@@ -85,6 +85,7 @@ SETS = {
     "validation_holdout30": "validation_holdout30",
     "validation_holdout31": "validation_holdout31",
     "validation_holdout32": "validation_holdout32",
+    "validation_holdout33": "validation_holdout33",
     "mitsuba_set": "validation_mitsuba",
     "mitsuba_holdout": "validation_mitsuba_holdout",
     "mitsuba_holdout2": "validation_mitsuba_holdout2",
@@ -104,6 +105,7 @@ SETS = {
     "mitsuba_holdout16": "validation_mitsuba_holdout16",
     "mitsuba_holdout17": "validation_mitsuba_holdout17",
     "mitsuba_holdout18": "validation_mitsuba_holdout18",
+    "mitsuba_holdout19": "validation_mitsuba_holdout19",
 }
 RESULTS = HERE / "results"
 #: Levels of the object posterior's quantiles kept in each score (200, evenly
@@ -244,6 +246,7 @@ DEFAULT_METHODS = {
     "mitsuba_holdout16": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
     "mitsuba_holdout17": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
     "mitsuba_holdout18": ("baseline", "perez"),  # mostly boxes; day-light merged (78)
+    "mitsuba_holdout19": ("baseline", "perez"),  # mostly boxes; day-light-lines merged (82)
     "validation_holdout4": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout5": ("baseline", "fixed", "families", "overcast-variants"),
     "validation_holdout6": ("baseline", "fixed", "families", "loo-equal"),
@@ -273,6 +276,7 @@ DEFAULT_METHODS = {
     "validation_holdout30": ("baseline", "perez"),  # the default; the floor 0.01 applied (71)
     "validation_holdout31": ("baseline", "perez"),  # mostly boxes; fresnel-start merged (75)
     "validation_holdout32": ("baseline", "perez"),  # mostly boxes; day-light merged (78)
+    "validation_holdout33": ("baseline", "perez"),  # mostly boxes; day-light-lines merged (82)
 }
 
 
